@@ -1,0 +1,38 @@
+# One target per CI step; `.ci/run` calls `make test`, the README's test command.
+PY ?= python3
+APT_PACKAGES := gcc-avr avr-libc qemu-system-misc
+
+.PHONY: deps install test test-rust test-python lint stubs bench demo
+
+# Debian packages the tests need (the AVR firmware build and its QEMU run). Skipped when
+# everything is present already; needs root (as on CI) otherwise.
+deps:
+	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $$missing >/dev/null; \
+	fi
+
+# The package in editable mode with its test extras (builds the Rust core in release mode).
+install:
+	$(PY) -m pip install -q -e '.[test]'
+
+test-rust:
+	cargo test --no-default-features --quiet
+
+test-python:
+	$(PY) -m pytest -q
+
+lint:
+	$(PY) -m ruff check python tests benches
+	$(PY) -m mypy.stubtest triaxcal._core
+
+# Everything: the README's test command, and what CI runs.
+test: deps install test-rust lint test-python
+
+bench:
+	$(PY) benches/bench_fit.py
+
+demo:
+	triaxcal demo

@@ -1,0 +1,42 @@
+"""triaxcal: calibrate three-axis accelerometers, gyroscopes and magnetometers.
+
+Fits run in Rust (``triaxcal._core``) with the GIL released; capture, export and the CLI are
+Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
+"""
+
+from ._core import __version__
+from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
+from .fit import (
+    MODELS,
+    BatchFit,
+    Descent,
+    EllipsoidFit,
+    LinearSphere,
+    descend_center,
+    fit_batch,
+    fit_ellipsoid,
+    fit_sphere,
+    fit_sphere_linear,
+    grid_center,
+    sphere_error,
+)
+
+__all__ = [
+    "MODELS",
+    "BatchFit",
+    "CalibrationError",
+    "DegenerateDataError",
+    "Descent",
+    "EllipsoidFit",
+    "LinearSphere",
+    "NonFiniteError",
+    "TooFewPointsError",
+    "__version__",
+    "descend_center",
+    "fit_batch",
+    "fit_ellipsoid",
+    "fit_sphere",
+    "fit_sphere_linear",
+    "grid_center",
+    "sphere_error",
+]

@@ -1,0 +1,66 @@
+"""Input validation shared by the public functions: array-likes in, contiguous float64 out."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .errors import CalibrationError, NonFiniteError
+
+
+def as_points(points: Any, name: str = "points", min_rows: int = 0) -> np.ndarray:
+    """Return ``points`` as a C-contiguous float64 array of shape (N, 3).
+
+    Accepts any array-like of real numbers (int16 straight from a sensor is fine). Raises
+    :class:`CalibrationError` for wrong shapes or dtypes, with a message saying what to pass.
+    """
+    try:
+        arr = np.asarray(points)
+    except (ValueError, TypeError) as exc:  # ragged lists and the like
+        raise CalibrationError(
+            f"{name} must be an (N, 3) array of numbers; could not convert it ({exc})"
+        ) from None
+    if arr.dtype.kind not in "iuf":
+        raise CalibrationError(
+            f"{name} must hold real numbers (integer or float), got dtype {arr.dtype}; "
+            "convert text columns with np.asarray(x, dtype=float) first"
+        )
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise CalibrationError(
+            f"{name} must have shape (N, 3), one row of x, y, z per reading; got shape "
+            f"{arr.shape}"
+        )
+    if arr.shape[0] < min_rows:
+        raise CalibrationError(f"{name} needs at least {min_rows} rows, got {arr.shape[0]}")
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def as_vector(value: Any, name: str) -> tuple[float, float, float]:
+    """Return a finite 3-vector (a scalar is repeated on all three axes)."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        arr = np.repeat(arr, 3)
+    if arr.shape != (3,):
+        raise CalibrationError(f"{name} must be a number or 3 numbers, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise NonFiniteError(f"{name} must be finite, got {arr.tolist()}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def as_radius(radius: Any, *, allow_none: bool = True) -> float | None:
+    """Return ``radius`` as a positive float (or None where allowed)."""
+    if radius is None:
+        if allow_none:
+            return None
+        raise CalibrationError("radius is required: the magnitude calibrated readings must have")
+    try:
+        r = float(radius)
+    except (TypeError, ValueError):
+        raise CalibrationError(
+            f"radius must be a number (1.0 for g, 9.80665 for m/s^2, the field in uT), got "
+            f"{radius!r}"
+        ) from None
+    if not (np.isfinite(r) and r > 0):
+        raise CalibrationError(f"radius must be a finite number greater than zero, got {r}")
+    return r

@@ -1,0 +1,53 @@
+"""The ``triaxcal`` command line. Each subcommand lives in its own module of this package and
+exposes ``register(subparsers)``; ``main`` dispatches to the function it sets as ``func``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+from .. import __version__
+from ..errors import CalibrationError
+
+#: Subcommand modules, in the order ``--help`` lists them.
+COMMANDS = ("demo", "capture", "fit", "export", "report", "send")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="triaxcal",
+        description="Calibrate three-axis accelerometers, gyroscopes and magnetometers.",
+    )
+    parser.add_argument("--version", action="version", version=f"triaxcal {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            mod = importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as exc:  # a subcommand not written yet
+            if exc.name == f"{__name__}.{name}":
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except CalibrationError as exc:
+        print(f"triaxcal {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"triaxcal {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

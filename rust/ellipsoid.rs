@@ -1,0 +1,767 @@
+//! Geometric ellipsoid fits by Gauss-Newton / Levenberg-Marquardt.
+//!
+//! Error model (the autopilots' compass and accelerometer calibrators use the same one): a raw
+//! reading `p` and the true field `f` of constant magnitude `R` are related by
+//!
+//! ```text
+//!     f = W (p - offset)
+//! ```
+//!
+//! where `offset` is the bias / hard iron and the symmetric positive-definite `W` holds the
+//! scale factors on its diagonal (`diag`) and the cross-axis / soft-iron terms off it
+//! (`offdiag`). Calibrated readings are `(raw - offset) @ W.T` in numpy terms: the gain
+//! *multiplies*. Three models:
+//!
+//! | model    | unknowns                    | W                       |
+//! |----------|-----------------------------|-------------------------|
+//! | `Sphere` | offset, 1 scale             | `k I`                   |
+//! | `Axis`   | offset, 3 gains             | `diag(g)`               |
+//! | `Full`   | offset, symmetric 3x3 `W`   | `[[d,e,f],[e,d',g],..]` |
+//!
+//! The residual of a point is `‖W (p - offset)‖ - R`, the geometric error along the field
+//! direction. Internally the fit works on normalised coordinates `q = (p - mean) / scale` with
+//! `R = 1`; results are mapped back at the end. It starts from an algebraic fit (the
+//! least-squares quadric, i.e. the smallest eigenvector of the design scatter matrix, itself
+//! started from the linear sphere fit where the quadric is no ellipsoid), then refines with
+//! Levenberg-Marquardt. Each iteration is one streaming pass that accumulates `JᵀJ`, `Jᵀr` and
+//! the cost: extra memory does not grow with the number of points. Large inputs are first
+//! solved on an evenly strided subsample, then refined on all points.
+
+use crate::error::{check_finite, check_positive, CalError, Result};
+use crate::geometry::{check_three_dimensional, Spread};
+use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SymmetricEigen, Vector3};
+use rayon::prelude::*;
+
+const CHUNK: usize = 8192;
+/// Inputs with more points than this are first solved on a strided subsample.
+const SUBSAMPLE_ABOVE: usize = 60_000;
+/// Size of that subsample.
+const SUBSAMPLE_SIZE: usize = 20_000;
+
+/// Which parameters are fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Model {
+    /// Offset and one scale: `W = k I`.
+    Sphere,
+    /// Offset and three gains: `W = diag(g)`.
+    Axis,
+    /// Offset and a symmetric `W`: scale, cross-axis, hard and soft iron.
+    Full,
+}
+
+impl Model {
+    /// Parses `"sphere"`, `"axis"` or `"full"`.
+    pub fn parse(name: &str) -> Result<Model> {
+        match name {
+            "sphere" => Ok(Model::Sphere),
+            "axis" => Ok(Model::Axis),
+            "full" => Ok(Model::Full),
+            other => Err(CalError::InvalidArgument(format!(
+                "unknown model {other:?}: use \"sphere\" (offset only), \"axis\" (offset + 3 gains) \
+                 or \"full\" (offset + symmetric 3x3 matrix)"
+            ))),
+        }
+    }
+    /// The name accepted by [`Model::parse`].
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Sphere => "sphere",
+            Model::Axis => "axis",
+            Model::Full => "full",
+        }
+    }
+    /// Number of unknowns.
+    pub fn nparams(self) -> usize {
+        match self {
+            Model::Sphere => 4,
+            Model::Axis => 6,
+            Model::Full => 9,
+        }
+    }
+    /// Names of the parameters whose standard errors [`EllipsoidFit::stderr`] reports.
+    pub fn param_names(self) -> &'static [&'static str] {
+        match self {
+            Model::Sphere => &["offset_x", "offset_y", "offset_z", "data_radius"],
+            Model::Axis => &["offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z"],
+            Model::Full => &[
+                "offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z", "offdiag_xy",
+                "offdiag_xz", "offdiag_yz",
+            ],
+        }
+    }
+}
+
+/// How the parameters are refined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Levenberg-Marquardt (the default).
+    LevenbergMarquardt,
+    /// Gauss-Newton with step halving.
+    GaussNewton,
+    /// No refinement: the algebraic (least-squares quadric) fit on all points.
+    Algebraic,
+}
+
+impl Method {
+    /// Parses `"lm"`, `"gn"` or `"algebraic"`.
+    pub fn parse(name: &str) -> Result<Method> {
+        match name {
+            "lm" => Ok(Method::LevenbergMarquardt),
+            "gn" => Ok(Method::GaussNewton),
+            "algebraic" => Ok(Method::Algebraic),
+            other => Err(CalError::InvalidArgument(format!(
+                "unknown method {other:?}: use \"lm\" (Levenberg-Marquardt), \"gn\" (Gauss-Newton) \
+                 or \"algebraic\" (no refinement)"
+            ))),
+        }
+    }
+}
+
+/// Options of [`fit_ellipsoid`].
+#[derive(Debug, Clone, Copy)]
+pub struct FitOptions {
+    /// The model.
+    pub model: Model,
+    /// Magnitude calibrated readings must have (1.0 for g, 9.80665 for m/s², the local field in
+    /// µT); `None` keeps the data's own scale (`det W = 1`).
+    pub radius: Option<f64>,
+    /// Most iterations (trial steps) of the refinement.
+    pub max_iter: usize,
+    /// Converged when an accepted step lowers the cost by less than this fraction.
+    pub tol: f64,
+    /// How to refine.
+    pub method: Method,
+    /// Use rayon inside the fit (off in batches, which parallelise over data sets).
+    pub parallel: bool,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            model: Model::Full,
+            radius: None,
+            max_iter: 100,
+            tol: 1e-12,
+            method: Method::LevenbergMarquardt,
+            parallel: true,
+        }
+    }
+}
+
+/// The result of [`fit_ellipsoid`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct EllipsoidFit {
+    /// The model fitted.
+    pub model: Model,
+    /// Offset (bias, hard iron), in raw units.
+    pub offset: [f64; 3],
+    /// `W`, row-major: `calibrated = W (raw - offset)`.
+    pub matrix: [[f64; 3]; 3],
+    /// Magnitude of calibrated readings: the requested radius, or the data's own.
+    pub radius: f64,
+    /// RMS of `‖calibrated‖ - radius`, in calibrated units.
+    pub rms: f64,
+    /// Standard errors of the parameters named by [`Model::param_names`] (offset in raw units,
+    /// matrix terms in calibrated units per raw unit, `data_radius` in raw units).
+    pub stderr: Vec<f64>,
+    /// Trial steps taken by the refinement (0 for the algebraic method).
+    pub iterations: usize,
+    /// Whether the refinement met its tolerance.
+    pub converged: bool,
+    /// Condition number of the column-scaled normal matrix at the solution.
+    pub condition: f64,
+    /// Number of points.
+    pub n: usize,
+    /// Plain-language warnings (poor coverage, no convergence).
+    pub warnings: Vec<String>,
+}
+
+// ----------------------------------------------------------------------------------------
+// parameter vectors (normalised coordinates, unit radius)
+//   Sphere: [offset_x, offset_y, offset_z, k]
+//   Axis:   [offset_x, offset_y, offset_z, diag_x, diag_y, diag_z]
+//   Full:   [offset_x, offset_y, offset_z, diag_x, diag_y, diag_z, offdiag_xy, offdiag_xz, offdiag_yz]
+
+fn w_of(model: Model, th: &[f64]) -> Matrix3<f64> {
+    match model {
+        Model::Sphere => Matrix3::identity() * th[3],
+        Model::Axis => Matrix3::from_diagonal(&Vector3::new(th[3], th[4], th[5])),
+        Model::Full => Matrix3::new(th[3], th[6], th[7], th[6], th[4], th[8], th[7], th[8], th[5]),
+    }
+}
+
+fn theta_of(model: Model, o: Vector3<f64>, w: &Matrix3<f64>) -> Vec<f64> {
+    let mut th = vec![o.x, o.y, o.z];
+    match model {
+        Model::Sphere => th.push(w.trace() / 3.0),
+        Model::Axis => th.extend([w[(0, 0)], w[(1, 1)], w[(2, 2)]]),
+        Model::Full => {
+            th.extend([w[(0, 0)], w[(1, 1)], w[(2, 2)], w[(0, 1)], w[(0, 2)], w[(1, 2)]])
+        }
+    }
+    th
+}
+
+/// Normalisation of coordinates: `q = (p - mean) * inv_scale`.
+#[derive(Clone, Copy)]
+struct Norm {
+    mean: Vector3<f64>,
+    inv_scale: f64,
+}
+
+impl Norm {
+    #[inline(always)]
+    fn q(&self, p: &[f64; 3]) -> Vector3<f64> {
+        (Vector3::new(p[0], p[1], p[2]) - self.mean) * self.inv_scale
+    }
+}
+
+/// Sums over the points for one parameter vector: `JᵀJ` (upper triangle), `Jᵀr`, `Σ r²`.
+#[derive(Clone)]
+struct Acc<const P: usize> {
+    jtj: [[f64; P]; P],
+    jtr: [f64; P],
+    cost: f64,
+}
+
+impl<const P: usize> Acc<P> {
+    fn zero() -> Self {
+        Acc { jtj: [[0.0; P]; P], jtr: [0.0; P], cost: 0.0 }
+    }
+    fn add(mut self, o: Self) -> Self {
+        for i in 0..P {
+            for j in i..P {
+                self.jtj[i][j] += o.jtj[i][j];
+            }
+            self.jtr[i] += o.jtr[i];
+        }
+        self.cost += o.cost;
+        self
+    }
+}
+
+/// Residual and Jacobian row of one point (normalised coordinates, unit radius).
+/// Entries are labelled by parameter, as in the parameter-vector comment above.
+#[inline(always)]
+fn row<const P: usize>(model: Model, w: &Matrix3<f64>, o: &Vector3<f64>, q: Vector3<f64>) -> (f64, [f64; P]) {
+    let u = q - o;
+    let v = w * u;
+    let n = v.norm();
+    let r = n - 1.0;
+    let mut j = [0.0; P];
+    if n > 0.0 {
+        let inv = 1.0 / n;
+        let wv = w * v; // d r / d offset = -(W v)ᵀ / n, W symmetric
+        j[0] = -wv.x * inv;
+        j[1] = -wv.y * inv;
+        j[2] = -wv.z * inv;
+        match model {
+            Model::Sphere => j[3] = v.dot(&u) * inv, // k
+            Model::Axis | Model::Full => {
+                j[3] = v.x * u.x * inv; // diag_x
+                j[4] = v.y * u.y * inv; // diag_y
+                j[5] = v.z * u.z * inv; // diag_z
+                if P == 9 {
+                    j[6] = (v.x * u.y + v.y * u.x) * inv; // offdiag_xy
+                    j[7] = (v.x * u.z + v.z * u.x) * inv; // offdiag_xz
+                    j[8] = (v.y * u.z + v.z * u.y) * inv; // offdiag_yz
+                }
+            }
+        }
+    }
+    (r, j)
+}
+
+fn accumulate<const P: usize>(
+    points: &[[f64; 3]],
+    stride: usize,
+    norm: Norm,
+    model: Model,
+    th: &[f64],
+    parallel: bool,
+) -> Acc<P> {
+    let w = w_of(model, th);
+    let o = Vector3::new(th[0], th[1], th[2]);
+    let part = |chunk: &[[f64; 3]]| -> Acc<P> {
+        let mut acc = Acc::<P>::zero();
+        for p in chunk.iter().step_by(stride) {
+            let (r, j) = row::<P>(model, &w, &o, norm.q(p));
+            acc.cost += r * r;
+            for a in 0..P {
+                acc.jtr[a] += j[a] * r;
+                for b in a..P {
+                    acc.jtj[a][b] += j[a] * j[b];
+                }
+            }
+        }
+        acc
+    };
+    let chunk = CHUNK * stride;
+    if parallel && points.len() / stride >= 2 * CHUNK {
+        points.par_chunks(chunk).map(part).reduce(Acc::zero, Acc::add)
+    } else {
+        part(points)
+    }
+}
+
+fn full_matrix<const P: usize>(acc: &Acc<P>) -> DMatrix<f64> {
+    DMatrix::from_fn(P, P, |i, j| if i <= j { acc.jtj[i][j] } else { acc.jtj[j][i] })
+}
+
+// ----------------------------------------------------------------------------------------
+// starting points
+
+/// Linear sphere fit on normalised coordinates (see `sphere::fit_sphere_linear`).
+fn sphere_start(points: &[[f64; 3]], stride: usize, norm: Norm) -> Option<(Vector3<f64>, f64)> {
+    let mut ata = nalgebra::Matrix4::<f64>::zeros();
+    let mut atb = nalgebra::Vector4::<f64>::zeros();
+    for p in points.iter().step_by(stride) {
+        let q = norm.q(p);
+        let r = nalgebra::Vector4::new(2.0 * q.x, 2.0 * q.y, 2.0 * q.z, 1.0);
+        ata += r * r.transpose();
+        atb += r * q.norm_squared();
+    }
+    let sol = ata.cholesky()?.solve(&atb);
+    let c = Vector3::new(sol[0], sol[1], sol[2]);
+    let r2 = sol[3] + c.norm_squared();
+    (r2 > 0.0 && r2.is_finite()).then(|| (c, r2.sqrt()))
+}
+
+/// Algebraic quadric fit: the smallest eigenvector of the scatter matrix of the design rows
+/// `[x², y², z², 2xy, 2xz, 2yz, 2x, 2y, 2z, 1]` (cross terms dropped for `Axis`), converted to
+/// `(offset, W)` with unit radius. `None` when the quadric is not an ellipsoid.
+fn algebraic_start(points: &[[f64; 3]], stride: usize, norm: Norm, model: Model) -> Option<(Vector3<f64>, Matrix3<f64>)> {
+    let full = model == Model::Full;
+    let m = if full { 10 } else { 7 };
+    let mut s = DMatrix::<f64>::zeros(m, m);
+    let mut d = [0.0f64; 10];
+    // accumulate the upper triangle only
+    for p in points.iter().step_by(stride) {
+        let q = norm.q(p);
+        if full {
+            d = [q.x * q.x, q.y * q.y, q.z * q.z, 2.0 * q.x * q.y, 2.0 * q.x * q.z, 2.0 * q.y * q.z,
+                 2.0 * q.x, 2.0 * q.y, 2.0 * q.z, 1.0];
+        } else {
+            d[..7].copy_from_slice(&[q.x * q.x, q.y * q.y, q.z * q.z, 2.0 * q.x, 2.0 * q.y, 2.0 * q.z, 1.0]);
+        }
+        for a in 0..m {
+            for b in a..m {
+                s[(a, b)] += d[a] * d[b];
+            }
+        }
+    }
+    s.fill_lower_triangle_with_upper_triangle();
+    let eig = SymmetricEigen::new(s);
+    let imin = eig.eigenvalues.imin();
+    let v = eig.eigenvectors.column(imin);
+    let (mq, b, c) = if full {
+        (Matrix3::new(v[0], v[3], v[4], v[3], v[1], v[5], v[4], v[5], v[2]), Vector3::new(v[6], v[7], v[8]), v[9])
+    } else {
+        (Matrix3::from_diagonal(&Vector3::new(v[0], v[1], v[2])), Vector3::new(v[3], v[4], v[5]), v[6])
+    };
+    // make the quadratic part positive (the eigenvector's sign is arbitrary)
+    let (mq, b, c) = if mq.trace() < 0.0 { (-mq, -b, -c) } else { (mq, b, c) };
+    let o = mq.try_inverse()? * (-b);
+    let k = o.dot(&(mq * o)) - c;
+    if !(k > 0.0) {
+        return None;
+    }
+    let e = SymmetricEigen::new(mq / k);
+    if e.eigenvalues.iter().any(|&l| !(l > 0.0) || !l.is_finite()) {
+        return None;
+    }
+    let sq = Matrix3::from_diagonal(&e.eigenvalues.map(f64::sqrt));
+    let w = e.eigenvectors * sq * e.eigenvectors.transpose();
+    Some((o, w))
+}
+
+// ----------------------------------------------------------------------------------------
+// refinement
+
+struct Refined {
+    th: Vec<f64>,
+    iterations: usize,
+    converged: bool,
+}
+
+fn solve_damped(jtj: &DMatrix<f64>, jtr: &[f64], lambda: f64) -> Option<DVector<f64>> {
+    let p = jtj.nrows();
+    let mut a = jtj.clone();
+    for i in 0..p {
+        a[(i, i)] += lambda * jtj[(i, i)].max(1e-12);
+    }
+    let g = DVector::from_iterator(p, jtr.iter().map(|v| -v));
+    a.cholesky().map(|c| c.solve(&g))
+}
+
+fn refine<const P: usize>(
+    points: &[[f64; 3]],
+    stride: usize,
+    norm: Norm,
+    model: Model,
+    mut th: Vec<f64>,
+    opts: &FitOptions,
+) -> (Refined, Acc<P>) {
+    let par = opts.parallel;
+    let mut acc = accumulate::<P>(points, stride, norm, model, &th, par);
+    let mut lambda = if opts.method == Method::GaussNewton { 0.0 } else { 1e-3 };
+    let mut iterations = 0;
+    let mut converged = false;
+    while iterations < opts.max_iter {
+        let jtj = full_matrix(&acc);
+        let step = if opts.method == Method::GaussNewton {
+            solve_damped(&jtj, &acc.jtr, 0.0).or_else(|| solve_damped(&jtj, &acc.jtr, 1e-9))
+        } else {
+            solve_damped(&jtj, &acc.jtr, lambda)
+        };
+        let Some(delta) = step else {
+            if opts.method == Method::GaussNewton || lambda > 1e12 {
+                break;
+            }
+            lambda = (lambda * 10.0).max(1e-6);
+            iterations += 1;
+            continue;
+        };
+        let mut scale = 1.0;
+        let mut accepted = None;
+        // LM tries one step per iteration; GN halves its step up to 10 times
+        for _ in 0..if opts.method == Method::GaussNewton { 10 } else { 1 } {
+            iterations += 1;
+            let cand: Vec<f64> = th.iter().zip(delta.iter()).map(|(a, d)| a + scale * d).collect();
+            let cacc = accumulate::<P>(points, stride, norm, model, &cand, par);
+            if cacc.cost.is_finite() && cacc.cost <= acc.cost {
+                accepted = Some((cand, cacc));
+                break;
+            }
+            scale *= 0.5;
+            if iterations >= opts.max_iter {
+                break;
+            }
+        }
+        match accepted {
+            Some((cand, cacc)) => {
+                let decrease = acc.cost - cacc.cost;
+                let dnorm: f64 = delta.iter().map(|d| d * d).sum::<f64>().sqrt() * scale;
+                let tnorm: f64 = th.iter().map(|t| t * t).sum::<f64>().sqrt();
+                th = cand;
+                acc = cacc;
+                lambda = (lambda / 10.0).max(if lambda == 0.0 { 0.0 } else { 1e-12 });
+                if decrease <= opts.tol * acc.cost.max(1e-300) + 1e-300 || dnorm <= 1e-14 * (tnorm + 1e-14) {
+                    converged = true;
+                    break;
+                }
+            }
+            None => {
+                if opts.method == Method::GaussNewton {
+                    // no half step lowers the cost: a minimum to working precision
+                    converged = true;
+                    break;
+                }
+                lambda *= 10.0;
+                if lambda > 1e10 {
+                    converged = true; // no step lowers the cost: at a minimum to working precision
+                    break;
+                }
+            }
+        }
+    }
+    (Refined { th, iterations, converged }, acc)
+}
+
+// ----------------------------------------------------------------------------------------
+
+/// Fits an ellipsoid (or sphere) to `points`; see the module documentation for the model.
+///
+/// Errors: non-finite points, too few points for the model, points on a line or plane, or
+/// points that cover too little of the sphere to determine the model's parameters.
+pub fn fit_ellipsoid(points: &[[f64; 3]], opts: &FitOptions) -> Result<EllipsoidFit> {
+    check_finite(points)?;
+    if let Some(r) = opts.radius {
+        check_positive("radius", r)?;
+    }
+    if !(opts.tol.is_finite() && opts.tol >= 0.0) {
+        return Err(CalError::InvalidArgument(format!("tol must be a finite number >= 0, got {}", opts.tol)));
+    }
+    let model = opts.model;
+    let need = model.nparams() + 1;
+    if points.len() < need {
+        return Err(CalError::TooFewPoints { got: points.len(), need, what: match model {
+            Model::Sphere => "the \"sphere\" model (offset + scale, 4 unknowns)",
+            Model::Axis => "the \"axis\" model (offset + 3 gains, 6 unknowns)",
+            Model::Full => "the \"full\" model (offset + symmetric 3x3 matrix, 9 unknowns)",
+        } });
+    }
+    let sp = check_three_dimensional(points, &format!("\"{}\" model", model.name()))?;
+    match model {
+        Model::Sphere => fit_generic::<4>(points, &sp, opts),
+        Model::Axis => fit_generic::<6>(points, &sp, opts),
+        Model::Full => fit_generic::<9>(points, &sp, opts),
+    }
+}
+
+fn not_determined(model: Model, detail: &str) -> CalError {
+    let simpler = match model {
+        Model::Full => " or use a simpler model (model=\"axis\" or \"sphere\")",
+        Model::Axis => " or use model=\"sphere\"",
+        Model::Sphere => "",
+    };
+    CalError::Degenerate {
+        why: format!("the points do not determine the \"{}\" model ({detail})", model.name()),
+        fix: format!(
+            "they cover too small a part of the sphere: turn the sensor through more orientations, \
+             including upside down and on each side,{simpler}"
+        ),
+    }
+}
+
+fn fit_generic<const P: usize>(points: &[[f64; 3]], sp: &Spread, opts: &FitOptions) -> Result<EllipsoidFit> {
+    let model = opts.model;
+    let n = points.len();
+    let norm = Norm { mean: sp.mean, inv_scale: 1.0 / sp.scale };
+    let sub = if n > SUBSAMPLE_ABOVE && opts.method != Method::Algebraic { n / SUBSAMPLE_SIZE } else { 1 };
+
+    // starting point
+    let start = match model {
+        Model::Sphere => None,
+        _ => algebraic_start(points, sub, norm, model),
+    };
+    let (o0, w0) = match start {
+        Some(s) => s,
+        None => {
+            if opts.method == Method::Algebraic && model != Model::Sphere {
+                return Err(not_determined(model, "the least-squares quadric is not an ellipsoid"));
+            }
+            let (c, r) = sphere_start(points, sub, norm).ok_or_else(|| not_determined(model, "no sphere fits them"))?;
+            (c, Matrix3::identity() / r)
+        }
+    };
+    let th0 = theta_of(model, o0, &w0);
+
+    let (th, iterations, converged, acc) = if opts.method == Method::Algebraic {
+        let acc = accumulate::<P>(points, 1, norm, model, &th0, opts.parallel);
+        (th0, 0, true, acc)
+    } else if sub > 1 {
+        let (r1, _) = refine::<P>(points, sub, norm, model, th0, opts);
+        let (r2, acc) = refine::<P>(points, 1, norm, model, r1.th, opts);
+        (r2.th, r1.iterations + r2.iterations, r2.converged, acc)
+    } else {
+        let (r, acc) = refine::<P>(points, 1, norm, model, th0, opts);
+        (r.th, r.iterations, r.converged, acc)
+    };
+
+    // W and -W (or any sign flip of an eigenvalue) give the same residuals: take |W|.
+    let w_raw = w_of(model, &th);
+    let e = SymmetricEigen::new(w_raw);
+    let abs_l = e.eigenvalues.map(f64::abs);
+    if abs_l.min() <= 1e-9 * abs_l.max() || !abs_l.iter().all(|v| v.is_finite()) {
+        return Err(not_determined(model, "a gain went to zero"));
+    }
+    let w1 = e.eigenvectors * Matrix3::from_diagonal(&abs_l) * e.eigenvectors.transpose();
+    let w1 = (w1 + w1.transpose()) * 0.5;
+
+    // conditioning and standard errors in normalised coordinates
+    let jtj = full_matrix(&acc);
+    let dscale = DVector::from_iterator(P, (0..P).map(|i| 1.0 / jtj[(i, i)].max(1e-300).sqrt()));
+    let scaled = DMatrix::from_fn(P, P, |i, j| jtj[(i, j)] * dscale[i] * dscale[j]);
+    let ev = SymmetricEigen::new(scaled.clone()).eigenvalues;
+    let (emin, emax) = (ev.min(), ev.max());
+    let condition = if emin > 0.0 { emax / emin } else { f64::INFINITY };
+    if !(condition < 1e13) {
+        return Err(not_determined(model, &format!("condition number {condition:.1e}")));
+    }
+    let dof = (n - P).max(1) as f64;
+    let sigma2 = acc.cost / dof;
+    let cov_diag: Vec<f64> = match scaled.try_inverse() {
+        Some(inv) => (0..P).map(|i| inv[(i, i)] * dscale[i] * dscale[i] * sigma2).collect(),
+        None => return Err(not_determined(model, "singular normal matrix")),
+    };
+    let se_th: Vec<f64> = cov_diag.iter().map(|v| v.max(0.0).sqrt()).collect();
+
+    // back to raw units: p = mean + scale q, so offset = mean + scale o, W_unit = W1 / scale
+    let s = sp.scale;
+    let o = Vector3::new(th[0], th[1], th[2]);
+    let offset = sp.mean + o * s;
+    let w_unit = w1 / s;
+    let (radius, factor) = match opts.radius {
+        Some(r) => (r, r),
+        None => {
+            let rho = w_unit.determinant().abs().powf(-1.0 / 3.0);
+            (rho, rho)
+        }
+    };
+    let mut matrix = w_unit * factor;
+    if model == Model::Sphere && opts.radius.is_none() {
+        matrix = Matrix3::identity();
+    }
+    let mut stderr: Vec<f64> = se_th[..3].iter().map(|v| v * s).collect();
+    match model {
+        Model::Sphere => {
+            let k = th[3].abs();
+            stderr.push(s / (k * k) * se_th[3]); // data radius = s / k
+        }
+        _ => stderr.extend(se_th[3..].iter().map(|v| v / s * factor)),
+    }
+    let rms = (acc.cost / n as f64).sqrt() * radius;
+
+    let mut warnings = Vec::new();
+    if !converged {
+        warnings.push(format!(
+            "the fit did not converge in {} iterations: the result may be inaccurate; raise \
+             max_iter or check the data",
+            opts.max_iter
+        ));
+    }
+    // radius of the data in raw units, for relative standard errors of the offset
+    let raw_radius = radius / matrix.norm() * 3f64.sqrt();
+    let worst = stderr[..3].iter().cloned().fold(0.0, f64::max) / raw_radius;
+    if worst > 0.01 {
+        warnings.push(format!(
+            "the offset is poorly determined (standard error up to {:.1}% of the radius): the \
+             points cover only part of the sphere; turn the sensor through more orientations",
+            100.0 * worst
+        ));
+    } else if condition > 1e8 {
+        warnings.push(format!(
+            "the fit is ill-conditioned (condition number {condition:.1e}): the points cover only \
+             part of the sphere; turn the sensor through more orientations"
+        ));
+    }
+    let mut m = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[i][j] = matrix[(i, j)];
+        }
+    }
+    Ok(EllipsoidFit {
+        model,
+        offset: [offset.x, offset.y, offset.z],
+        matrix: m,
+        radius,
+        rms,
+        stderr,
+        iterations,
+        converged,
+        condition,
+        n,
+        warnings,
+    })
+}
+
+/// Applies a fit: `out[i] = W (points[i] - offset)`.
+pub fn apply(points: &[[f64; 3]], offset: [f64; 3], matrix: [[f64; 3]; 3], out: &mut [[f64; 3]]) {
+    let w = SMatrix::<f64, 3, 3>::from_fn(|i, j| matrix[i][j]);
+    for (p, o) in points.iter().zip(out.iter_mut()) {
+        let v = w * Vector3::new(p[0] - offset[0], p[1] - offset[1], p[2] - offset[2]);
+        *o = [v.x, v.y, v.z];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Fibonacci sphere mapped through `W⁻¹` and shifted by `offset`.
+    pub(crate) fn ellipsoid_points(offset: [f64; 3], w: Matrix3<f64>, r: f64, n: usize) -> Vec<[f64; 3]> {
+        let winv = w.try_inverse().unwrap();
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let rr = (1.0 - z * z).sqrt();
+                let t = golden * i as f64;
+                let f = Vector3::new(rr * t.cos(), rr * t.sin(), z) * r;
+                let p = winv * f + Vector3::from(offset);
+                [p.x, p.y, p.z]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn recovers_exact_full_model() {
+        let w = Matrix3::new(1.1, 0.05, -0.02, 0.05, 0.9, 0.03, -0.02, 0.03, 1.05) / 16384.0;
+        let pts = ellipsoid_points([300.0, -200.0, 150.0], w, 1.0, 400);
+        let f = fit_ellipsoid(&pts, &FitOptions { radius: Some(1.0), ..Default::default() }).unwrap();
+        assert!(f.converged);
+        for k in 0..3 {
+            assert!((f.offset[k] - [300.0, -200.0, 150.0][k]).abs() < 1e-6, "{:?}", f.offset);
+            for j in 0..3 {
+                assert!((f.matrix[k][j] - w[(k, j)]).abs() < 1e-12, "{:?}", f.matrix);
+            }
+        }
+        assert!(f.rms < 1e-10);
+    }
+
+    #[test]
+    fn large_input_takes_the_subsample_path() {
+        let w = Matrix3::new(1.02, 0.01, 0.0, 0.01, 0.98, 0.0, 0.0, 0.0, 1.0);
+        let pts = ellipsoid_points([0.1, 0.2, -0.3], w, 9.80665, 100_000);
+        let f = fit_ellipsoid(&pts, &FitOptions { radius: Some(9.80665), ..Default::default() }).unwrap();
+        assert!(f.converged && f.rms < 1e-9, "{f:?}");
+    }
+
+    #[test]
+    fn own_scale_has_unit_determinant() {
+        let w = Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 0.5));
+        let pts = ellipsoid_points([1.0, 2.0, 3.0], w, 5.0, 200);
+        let f = fit_ellipsoid(&pts, &FitOptions { model: Model::Axis, ..Default::default() }).unwrap();
+        let m = Matrix3::from_fn(|i, j| f.matrix[i][j]);
+        assert!((m.determinant() - 1.0).abs() < 1e-9);
+        assert!((f.radius - 5.0).abs() < 1e-9, "{}", f.radius);
+    }
+
+    #[test]
+    fn too_few_points_and_cap_errors() {
+        let pts = ellipsoid_points([0.0; 3], Matrix3::identity(), 1.0, 9);
+        assert!(matches!(fit_ellipsoid(&pts, &FitOptions::default()), Err(CalError::TooFewPoints { need: 10, .. })));
+        // a thin cap: all points within ~3 degrees of the north pole
+        let cap: Vec<[f64; 3]> = (0..200)
+            .map(|i| {
+                let t = i as f64 * 0.7;
+                let a = 0.05 * ((i % 7) as f64 / 7.0 + 0.1);
+                [a * t.cos(), a * t.sin(), (1.0 - a * a).sqrt()]
+            })
+            .collect();
+        let e = fit_ellipsoid(&cap, &FitOptions::default()).unwrap_err();
+        assert!(matches!(e, CalError::Degenerate { .. }), "{e}");
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        #[test]
+        fn recovers_random_offset_and_matrix(
+            ox in -500.0..500.0f64, oy in -500.0..500.0f64, oz in -500.0..500.0f64,
+            d in proptest::array::uniform3(0.8..1.25f64), e in proptest::array::uniform3(-0.08..0.08f64),
+        ) {
+            let w = Matrix3::new(d[0], e[0], e[1], e[0], d[1], e[2], e[1], e[2], d[2]) / 1000.0;
+            let pts = ellipsoid_points([ox, oy, oz], w, 1.0, 300);
+            let f = fit_ellipsoid(&pts, &FitOptions { radius: Some(1.0), ..Default::default() }).unwrap();
+            for k in 0..3 {
+                prop_assert!((f.offset[k] - [ox, oy, oz][k]).abs() < 1e-6);
+                for j in 0..3 {
+                    prop_assert!((f.matrix[k][j] - w[(k, j)]).abs() < 1e-10);
+                }
+            }
+        }
+
+        #[test]
+        fn invariant_under_translation_and_rotation(tx in -1e4..1e4f64, angle in 0.0..6.28f64) {
+            let w = Matrix3::new(1.1, 0.0, 0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 1.0);
+            let pts = ellipsoid_points([0.0; 3], w, 1.0, 200);
+            let f0 = fit_ellipsoid(&pts, &FitOptions { radius: Some(1.0), ..Default::default() }).unwrap();
+            let rot = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), angle);
+            let moved: Vec<[f64; 3]> = pts.iter().map(|p| {
+                let v = rot * Vector3::new(p[0], p[1], p[2]) + Vector3::new(tx, -tx, 0.5 * tx);
+                [v.x, v.y, v.z]
+            }).collect();
+            let f1 = fit_ellipsoid(&moved, &FitOptions { radius: Some(1.0), ..Default::default() }).unwrap();
+            let want = rot * Vector3::from(f0.offset) + Vector3::new(tx, -tx, 0.5 * tx);
+            for k in 0..3 { prop_assert!((f1.offset[k] - want[k]).abs() < 1e-6 * (1.0 + tx.abs())); }
+            let w0 = Matrix3::from_fn(|i, j| f0.matrix[i][j]);
+            let w1 = Matrix3::from_fn(|i, j| f1.matrix[i][j]);
+            let w0r = rot.matrix() * w0 * rot.matrix().transpose();
+            prop_assert!((w1 - w0r).norm() < 1e-8);
+            prop_assert!((f1.rms - f0.rms).abs() < 1e-9);
+        }
+    }
+}

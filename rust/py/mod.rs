@@ -1,0 +1,243 @@
+//! The binding layer: the only code that names pyo3 or numpy. Each wrapper extracts borrowed
+//! numpy arrays, releases the GIL, calls the core, and returns plain values; the Python facade
+//! (`python/triaxcal/`) validates input first and builds the result objects.
+
+mod errors;
+
+use crate::batch;
+use crate::ellipsoid::{self, EllipsoidFit, FitOptions, Method, Model};
+use crate::error::CalError;
+use crate::sphere::{self, Descent, DescentOptions};
+use errors::{py_result, CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Borrows an (N, 3) C-contiguous float64 array as points, without copying.
+fn points<'a>(arr: &'a PyReadonlyArray2<'_, f64>) -> PyResult<&'a [[f64; 3]]> {
+    let shape = arr.shape();
+    if shape[1] != 3 {
+        return Err(CalibrationError::new_err(format!(
+            "points must have shape (N, 3), got (N, {}): pass one row per reading with x, y, z",
+            shape[1]
+        )));
+    }
+    let flat = arr
+        .as_slice()
+        .map_err(|_| CalibrationError::new_err("points must be C-contiguous (np.ascontiguousarray)"))?;
+    let (chunks, _) = flat.as_chunks::<3>();
+    Ok(chunks)
+}
+
+fn descent_dict<'py>(py: Python<'py>, d: Descent) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    out.set_item("center", d.center.to_vec())?;
+    out.set_item("error", d.error)?;
+    out.set_item("iterations", d.iterations)?;
+    out.set_item("evaluations", d.evaluations)?;
+    out.set_item("step", d.step)?;
+    out.set_item("converged", d.converged)?;
+    Ok(out)
+}
+
+fn fit_dict<'py>(py: Python<'py>, f: EllipsoidFit) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    out.set_item("model", f.model.name())?;
+    out.set_item("offset", f.offset.to_vec())?;
+    out.set_item("matrix", f.matrix.iter().map(|r| r.to_vec()).collect::<Vec<_>>())?;
+    out.set_item("radius", f.radius)?;
+    out.set_item("rms", f.rms)?;
+    out.set_item("stderr", f.stderr)?;
+    out.set_item("param_names", f.model.param_names().to_vec())?;
+    out.set_item("iterations", f.iterations)?;
+    out.set_item("converged", f.converged)?;
+    out.set_item("condition", f.condition)?;
+    out.set_item("n", f.n)?;
+    out.set_item("warnings", f.warnings)?;
+    Ok(out)
+}
+
+fn options(model: &str, radius: Option<f64>, max_iter: usize, tol: f64, method: &str) -> PyResult<FitOptions> {
+    Ok(FitOptions {
+        model: py_result(Model::parse(model))?,
+        radius,
+        max_iter,
+        tol,
+        method: py_result(Method::parse(method))?,
+        parallel: true,
+    })
+}
+
+/// Σ |‖p − center‖² − radius²| over the points.
+#[pyfunction]
+fn sphere_error(py: Python<'_>, points: PyReadonlyArray2<'_, f64>, center: [f64; 3], radius: f64) -> PyResult<f64> {
+    let pts = self::points(&points)?;
+    py_result(py.detach(|| sphere::sphere_error(pts, center, radius)))
+}
+
+/// Variable-step 26-neighbour descent for the centre of a sphere of known radius.
+#[pyfunction]
+#[pyo3(signature = (points, radius, *, start, step, min_step, shrink, max_iter))]
+fn descend_center<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    radius: f64,
+    start: [f64; 3],
+    step: f64,
+    min_step: f64,
+    shrink: f64,
+    max_iter: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let pts = self::points(&points)?;
+    let opts = DescentOptions { start, step, min_step, shrink, max_iter };
+    let d = py_result(py.detach(|| sphere::descend_center(pts, radius, opts)))?;
+    descent_dict(py, d)
+}
+
+/// Brute-force cube search for the centre of a sphere of known radius.
+#[pyfunction]
+#[pyo3(signature = (points, radius, *, lo, hi, step))]
+fn grid_center<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    radius: f64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    step: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let pts = self::points(&points)?;
+    let d = py_result(py.detach(|| sphere::grid_center(pts, radius, lo, hi, step)))?;
+    descent_dict(py, d)
+}
+
+/// Linear least-squares sphere fit: (center, radius, rms).
+#[pyfunction]
+fn fit_sphere_linear(py: Python<'_>, points: PyReadonlyArray2<'_, f64>) -> PyResult<([f64; 3], f64, f64)> {
+    let pts = self::points(&points)?;
+    let f = py_result(py.detach(|| sphere::fit_sphere_linear(pts)))?;
+    Ok((f.center, f.radius, f.rms))
+}
+
+/// Geometric ellipsoid fit; returns a dict of plain values.
+#[pyfunction]
+#[pyo3(signature = (points, *, model, radius, max_iter, tol, method))]
+fn fit_ellipsoid<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    model: &str,
+    radius: Option<f64>,
+    max_iter: usize,
+    tol: f64,
+    method: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let pts = self::points(&points)?;
+    let opts = options(model, radius, max_iter, tol, method)?;
+    let f = py_result(py.detach(|| ellipsoid::fit_ellipsoid(pts, &opts)))?;
+    fit_dict(py, f)
+}
+
+/// Fits many sets: `points` holds them back to back, set i is rows `bounds[i]..bounds[i+1]`.
+/// Returns (offsets (B,3), matrices (B,9), radii, rms, converged, iterations, errors).
+#[pyfunction]
+#[pyo3(signature = (points, bounds, *, model, radius, max_iter, tol, method))]
+fn fit_batch<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    bounds: PyReadonlyArray1<'py, i64>,
+    model: &str,
+    radius: Option<f64>,
+    max_iter: usize,
+    tol: f64,
+    method: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let pts = self::points(&points)?;
+    let b = bounds.as_slice().map_err(|_| CalibrationError::new_err("bounds must be contiguous"))?;
+    let opts = options(model, radius, max_iter, tol, method)?;
+    let mut sets = Vec::with_capacity(b.len().saturating_sub(1));
+    for w in b.windows(2) {
+        let (lo, hi) = (w[0], w[1]);
+        if lo < 0 || hi < lo || hi as usize > pts.len() {
+            return Err(CalibrationError::new_err("batch bounds out of range"));
+        }
+        sets.push(&pts[lo as usize..hi as usize]);
+    }
+    let results = py.detach(|| batch::fit_batch(&sets, &opts));
+    let nb = results.len();
+    let mut offsets = vec![f64::NAN; nb * 3];
+    let mut matrices = vec![f64::NAN; nb * 9];
+    let mut radii = vec![f64::NAN; nb];
+    let mut rms = vec![f64::NAN; nb];
+    let mut converged = vec![false; nb];
+    let mut iterations = vec![0i64; nb];
+    let mut errors: Vec<Option<String>> = vec![None; nb];
+    let mut kinds: Vec<Option<&'static str>> = vec![None; nb];
+    for (i, r) in results.into_iter().enumerate() {
+        match r {
+            Ok(f) => {
+                offsets[3 * i..3 * i + 3].copy_from_slice(&f.offset);
+                for a in 0..3 {
+                    matrices[9 * i + 3 * a..9 * i + 3 * a + 3].copy_from_slice(&f.matrix[a]);
+                }
+                radii[i] = f.radius;
+                rms[i] = f.rms;
+                converged[i] = f.converged;
+                iterations[i] = f.iterations as i64;
+            }
+            Err(e) => {
+                kinds[i] = Some(match e {
+                    CalError::NonFinite { .. } => "NonFiniteError",
+                    CalError::TooFewPoints { .. } => "TooFewPointsError",
+                    CalError::Degenerate { .. } => "DegenerateDataError",
+                    CalError::InvalidArgument(_) => "CalibrationError",
+                });
+                errors[i] = Some(e.to_string());
+            }
+        }
+    }
+    let out = PyDict::new(py);
+    out.set_item("offsets", PyArray1::from_vec(py, offsets).reshape([nb, 3])?)?;
+    out.set_item("matrices", PyArray1::from_vec(py, matrices).reshape([nb, 3, 3])?)?;
+    out.set_item("radii", PyArray1::from_vec(py, radii))?;
+    out.set_item("rms", PyArray1::from_vec(py, rms))?;
+    out.set_item("converged", PyArray1::from_vec(py, converged))?;
+    out.set_item("iterations", PyArray1::from_vec(py, iterations))?;
+    out.set_item("errors", errors)?;
+    out.set_item("error_kinds", kinds)?;
+    Ok(out)
+}
+
+/// Applies offset and matrix: (N, 3) -> (N, 3).
+#[pyfunction]
+fn apply<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    offset: [f64; 3],
+    matrix: [[f64; 3]; 3],
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let pts = self::points(&points)?;
+    let out = py.detach(|| {
+        let mut out = vec![[0.0; 3]; pts.len()];
+        ellipsoid::apply(pts, offset, matrix, &mut out);
+        out.into_iter().flatten().collect::<Vec<f64>>()
+    });
+    PyArray1::from_vec(py, out).reshape([pts.len(), 3])
+}
+
+/// The compiled core of triaxcal. Use the `triaxcal` package, not this module.
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("CalibrationError", py.get_type::<CalibrationError>())?;
+    m.add("NonFiniteError", py.get_type::<NonFiniteError>())?;
+    m.add("TooFewPointsError", py.get_type::<TooFewPointsError>())?;
+    m.add("DegenerateDataError", py.get_type::<DegenerateDataError>())?;
+    m.add_function(wrap_pyfunction!(sphere_error, m)?)?;
+    m.add_function(wrap_pyfunction!(descend_center, m)?)?;
+    m.add_function(wrap_pyfunction!(grid_center, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_sphere_linear, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_ellipsoid, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_batch, m)?)?;
+    m.add_function(wrap_pyfunction!(apply, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,469 @@
+//! Sphere of known radius: the error sum and the seed's three centre searches, plus the linear
+//! least-squares sphere fit (centre and radius unknown).
+//!
+//! Error model: a reading is `p = offset + field`, where the field (gravity, the Earth's
+//! magnetic field) has a known or unknown constant magnitude `R` in any orientation. The offset
+//! (bias, hard iron) is the centre of the sphere the readings lie on. Gains and cross-axis
+//! terms are ignored here: see `ellipsoid` for those.
+//!
+//! The error sum is the one of `../shared/seeds/sphere-center-descent.txt`:
+//! `E(c) = sum_i |(x_i - c_x)^2 + (y_i - c_y)^2 + (z_i - c_z)^2 - R^2|`.
+
+use crate::error::{check_finite, check_positive, CalError, Result};
+use crate::geometry::check_three_dimensional;
+use nalgebra::{Matrix4, Vector3, Vector4};
+use rayon::prelude::*;
+
+/// Points per rayon task; below twice this the sums run on the calling thread.
+const CHUNK: usize = 4096;
+
+/// The result of a centre search.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Descent {
+    /// The centre found (same units as the points).
+    pub center: [f64; 3],
+    /// The error sum at `center`.
+    pub error: f64,
+    /// Neighbourhoods examined (descent) or grid nodes visited (cube search).
+    pub iterations: usize,
+    /// Evaluations of the error sum.
+    pub evaluations: usize,
+    /// The step in force at the end.
+    pub step: f64,
+    /// False when the iteration limit stopped the search before the step fell below `min_step`.
+    pub converged: bool,
+}
+
+/// Options of [`descend_center`]; see [`DescentOptions::default`].
+#[derive(Debug, Clone, Copy)]
+pub struct DescentOptions {
+    /// Where the search starts.
+    pub start: [f64; 3],
+    /// The first step along each axis.
+    pub step: f64,
+    /// The search stops once the step has fallen below this. `min_step == step` gives the
+    /// fixed-step 26-neighbour descent.
+    pub min_step: f64,
+    /// The step is divided by this when no neighbour improves (must be > 1).
+    pub shrink: f64,
+    /// At most this many neighbourhoods are examined (a guard against a hang).
+    pub max_iter: usize,
+}
+
+impl Default for DescentOptions {
+    /// The seed's values: start at the origin, step 1000, divide by 10 down to 0.01.
+    fn default() -> Self {
+        DescentOptions { start: [0.0; 3], step: 1000.0, min_step: 0.01, shrink: 10.0, max_iter: 1_000_000 }
+    }
+}
+
+/// The error sum `sum |‖p - center‖² - radius²|`.
+///
+/// ```
+/// let pts = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
+/// let e = triaxcal::sphere::sphere_error(&pts, [0.0; 3], 1.0).unwrap();
+/// assert_eq!(e, 3.0);
+/// ```
+pub fn sphere_error(points: &[[f64; 3]], center: [f64; 3], radius: f64) -> Result<f64> {
+    check_finite(points)?;
+    if !radius.is_finite() || radius < 0.0 {
+        return Err(CalError::InvalidArgument(format!(
+            "radius must be a finite number >= 0, got {radius}"
+        )));
+    }
+    if !center.iter().all(|c| c.is_finite()) {
+        return Err(CalError::InvalidArgument("center must be finite".into()));
+    }
+    Ok(error_sum(points, center, radius * radius))
+}
+
+fn error_sum(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
+    let part = |chunk: &[[f64; 3]]| -> f64 {
+        chunk
+            .iter()
+            .map(|p| {
+                let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+                (x * x + y * y + z * z - r2).abs()
+            })
+            .sum()
+    };
+    if points.len() < 2 * CHUNK {
+        part(points)
+    } else {
+        points.par_chunks(CHUNK).map(part).sum()
+    }
+}
+
+/// The 26 neighbour offsets in units of the step, in a fixed order: x-major, then y, then z,
+/// from -1 to +1, skipping the centre. Ties between neighbours go to the first in this order.
+pub const NEIGHBOURS: [[i8; 3]; 26] = {
+    let mut out = [[0i8; 3]; 26];
+    let mut n = 0;
+    let mut i = -1i8;
+    while i <= 1 {
+        let mut j = -1i8;
+        while j <= 1 {
+            let mut k = -1i8;
+            while k <= 1 {
+                if !(i == 0 && j == 0 && k == 0) {
+                    out[n] = [i, j, k];
+                    n += 1;
+                }
+                k += 1;
+            }
+            j += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// Partial sums for the 26 neighbours of one centre.
+///
+/// For a point with `q = p - c`, `s = |q|² - R²` and `(a, b, c) = 2h q`, the error at the
+/// neighbour `c + h (i, j, k)` is `s - (i a + j b + k c) + h² (i² + j² + k²)`. A point whose
+/// error keeps one sign over the whole neighbourhood (`|s|` larger than the most the
+/// neighbourhood can change it) adds a term that is linear in `(i, j, k)`: such points are
+/// summed as moments, and only points near the sphere's surface are evaluated 26 times.
+#[derive(Clone, Copy)]
+struct NeighbourSums {
+    direct: [f64; 26],
+    // moments of the points of stable sign, each already multiplied by that sign:
+    // sum of s, of a, of b, of c, and the count (signed)
+    m: [f64; 5],
+}
+
+impl NeighbourSums {
+    fn zero() -> Self {
+        NeighbourSums { direct: [0.0; 26], m: [0.0; 5] }
+    }
+    fn add(mut self, o: Self) -> Self {
+        for t in 0..26 {
+            self.direct[t] += o.direct[t];
+        }
+        for t in 0..5 {
+            self.m[t] += o.m[t];
+        }
+        self
+    }
+    fn totals(&self, h2: f64) -> [f64; 26] {
+        let mut out = [0.0; 26];
+        for (t, d) in NEIGHBOURS.iter().enumerate() {
+            let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
+            let n = i * i + j * j + k * k;
+            out[t] = self.direct[t] + self.m[0] - i * self.m[1] - j * self.m[2] - k * self.m[3]
+                + h2 * n * self.m[4];
+        }
+        out
+    }
+}
+
+fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26] {
+    let h2 = h * h;
+    let part = |chunk: &[[f64; 3]]| -> NeighbourSums {
+        let mut acc = NeighbourSums::zero();
+        for p in chunk {
+            let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+            let s = x * x + y * y + z * z - r2;
+            let (a, b, cc) = (2.0 * h * x, 2.0 * h * y, 2.0 * h * z);
+            let reach = a.abs() + b.abs() + cc.abs();
+            if s > reach {
+                // positive everywhere in the neighbourhood (h² n >= 0 only adds)
+                acc.m[0] += s;
+                acc.m[1] += a;
+                acc.m[2] += b;
+                acc.m[3] += cc;
+                acc.m[4] += 1.0;
+            } else if s < -reach - 3.0 * h2 {
+                acc.m[0] -= s;
+                acc.m[1] -= a;
+                acc.m[2] -= b;
+                acc.m[3] -= cc;
+                acc.m[4] -= 1.0;
+            } else {
+                for (t, d) in NEIGHBOURS.iter().enumerate() {
+                    let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
+                    let e = s - (i * a + j * b + k * cc) + h2 * (i * i + j * j + k * k);
+                    acc.direct[t] += e.abs();
+                }
+            }
+        }
+        acc
+    };
+    let sums = if points.len() < 2 * CHUNK {
+        part(points)
+    } else {
+        points.par_chunks(CHUNK).map(part).reduce(NeighbourSums::zero, NeighbourSums::add)
+    };
+    sums.totals(h2)
+}
+
+/// Variable-step 26-neighbour descent for the centre of a sphere of known `radius`.
+///
+/// From `opts.start`, evaluate the error sum at the 26 neighbours one step away along each
+/// axis; move to the best one if it is better than the current centre, otherwise divide the
+/// step by `opts.shrink`; stop when the step falls below `opts.min_step`. With
+/// `min_step == step` this is the fixed-step descent.
+///
+/// ```
+/// use triaxcal::sphere::{descend_center, DescentOptions};
+/// let pts = [[11.0, 0.0, 0.0], [9.0, 0.0, 0.0], [10.0, 1.0, 0.0],
+///            [10.0, -1.0, 0.0], [10.0, 0.0, 1.0], [10.0, 0.0, -1.0]];
+/// let opts = DescentOptions { step: 1.0, min_step: 0.01, ..Default::default() };
+/// let d = descend_center(&pts, 1.0, opts).unwrap();
+/// assert_eq!(d.center, [10.0, 0.0, 0.0]);
+/// ```
+pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) -> Result<Descent> {
+    check_finite(points)?;
+    check_positive("radius", radius)?;
+    check_positive("step", opts.step)?;
+    check_positive("min_step", opts.min_step)?;
+    if !(opts.shrink.is_finite() && opts.shrink > 1.0) {
+        return Err(CalError::InvalidArgument(format!(
+            "shrink must be a finite number greater than 1, got {}",
+            opts.shrink
+        )));
+    }
+    if !opts.start.iter().all(|v| v.is_finite()) {
+        return Err(CalError::InvalidArgument("start must be finite".into()));
+    }
+    if points.len() < 4 {
+        return Err(CalError::TooFewPoints { got: points.len(), need: 4, what: "the centre search" });
+    }
+    check_three_dimensional(points, "centre")?;
+    let r2 = radius * radius;
+    let mut c = opts.start;
+    let mut err = error_sum(points, c, r2);
+    let mut evaluations = 1;
+    let mut step = opts.step;
+    let mut iterations = 0;
+    let mut converged = step < opts.min_step;
+    while !converged && iterations < opts.max_iter {
+        iterations += 1;
+        let sums = neighbour_sums(points, c, r2, step);
+        evaluations += 26;
+        let (best, best_err) = sums
+            .iter()
+            .enumerate()
+            .fold((usize::MAX, f64::INFINITY), |(bi, be), (i, &e)| if e < be { (i, e) } else { (bi, be) });
+        if best_err < err {
+            let d = NEIGHBOURS[best];
+            for k in 0..3 {
+                c[k] += step * d[k] as f64;
+            }
+            err = best_err;
+        } else {
+            step /= opts.shrink;
+            converged = step < opts.min_step;
+        }
+    }
+    // report the exact sum at the final centre (the neighbour sums add in another order)
+    let error = error_sum(points, c, r2);
+    Ok(Descent { center: c, error, iterations, evaluations: evaluations + 1, step, converged })
+}
+
+/// Largest number of grid nodes times points that [`grid_center`] accepts.
+pub const GRID_WORK_LIMIT: f64 = 2e11;
+
+/// Brute-force search of the cube `[lo, hi]` at `step` for the centre of a sphere of known
+/// `radius`: every node `lo + step * (i, j, k)` inside the cube is evaluated and the best
+/// kept (the first in x-major order on ties).
+pub fn grid_center(
+    points: &[[f64; 3]],
+    radius: f64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    step: f64,
+) -> Result<Descent> {
+    check_finite(points)?;
+    check_positive("radius", radius)?;
+    check_positive("step", step)?;
+    if points.is_empty() {
+        return Err(CalError::TooFewPoints { got: 0, need: 1, what: "the cube search" });
+    }
+    let mut counts = [0usize; 3];
+    for k in 0..3 {
+        if !(lo[k].is_finite() && hi[k].is_finite() && hi[k] >= lo[k]) {
+            return Err(CalError::InvalidArgument(format!(
+                "the cube must have finite bounds with lo <= hi on every axis, got lo={lo:?} hi={hi:?}"
+            )));
+        }
+        let n = ((hi[k] - lo[k]) / step * (1.0 + 1e-12)).floor() + 1.0;
+        if n * points.len() as f64 > GRID_WORK_LIMIT {
+            return Err(CalError::InvalidArgument(format!(
+                "the cube search would take too long ({n} nodes along one axis): use a larger step, \
+                 a smaller cube, or descend_center"
+            )));
+        }
+        counts[k] = n as usize;
+    }
+    let nodes = counts[0] as f64 * counts[1] as f64 * counts[2] as f64;
+    if nodes * points.len() as f64 > GRID_WORK_LIMIT {
+        return Err(CalError::InvalidArgument(format!(
+            "the cube search would evaluate {nodes:.3e} nodes x {} points, over the limit of \
+             {GRID_WORK_LIMIT:.0e}: use a larger step, a smaller cube, or descend_center",
+            points.len()
+        )));
+    }
+    let total = counts[0] * counts[1] * counts[2];
+    let r2 = radius * radius;
+    let node = |idx: usize| -> [f64; 3] {
+        let i = idx / (counts[1] * counts[2]);
+        let j = (idx / counts[2]) % counts[1];
+        let k = idx % counts[2];
+        [lo[0] + step * i as f64, lo[1] + step * j as f64, lo[2] + step * k as f64]
+    };
+    let eval = |idx: usize| -> (f64, usize) {
+        let c = node(idx);
+        let e: f64 = points
+            .iter()
+            .map(|p| {
+                let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+                (x * x + y * y + z * z - r2).abs()
+            })
+            .sum();
+        (e, idx)
+    };
+    let better = |a: (f64, usize), b: (f64, usize)| if b.0 < a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a };
+    let (error, best) = (0..total).into_par_iter().map(eval).reduce(|| (f64::INFINITY, usize::MAX), better);
+    Ok(Descent { center: node(best), error, iterations: total, evaluations: total, step, converged: true })
+}
+
+/// The result of a linear least-squares sphere fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearSphere {
+    /// Centre of the sphere.
+    pub center: [f64; 3],
+    /// Radius of the sphere.
+    pub radius: f64,
+    /// RMS of `‖p - center‖ - radius` over the points.
+    pub rms: f64,
+}
+
+/// Linear least-squares sphere fit: solves `|p|² = 2 c·p + d` for `c` and `d` on normalised
+/// coordinates (one streaming pass for the moments), then `radius² = d + |c|²`.
+///
+/// This minimises an algebraic error, not the geometric distance: fast, one pass, and the
+/// starting point of the geometric fits.
+pub fn fit_sphere_linear(points: &[[f64; 3]]) -> Result<LinearSphere> {
+    check_finite(points)?;
+    if points.len() < 4 {
+        return Err(CalError::TooFewPoints { got: points.len(), need: 4, what: "a sphere fit" });
+    }
+    let sp = check_three_dimensional(points, "sphere")?;
+    let (m, s) = (sp.mean, sp.scale);
+    let mut ata = Matrix4::<f64>::zeros();
+    let mut atb = Vector4::<f64>::zeros();
+    for p in points {
+        let q = (Vector3::new(p[0], p[1], p[2]) - m) / s;
+        let row = Vector4::new(2.0 * q.x, 2.0 * q.y, 2.0 * q.z, 1.0);
+        let rhs = q.norm_squared();
+        ata += row * row.transpose();
+        atb += row * rhs;
+    }
+    let sol = ata.cholesky().map(|ch| ch.solve(&atb)).ok_or_else(|| CalError::Degenerate {
+        why: "the points do not determine a sphere".into(),
+        fix: "turn the sensor through more orientations".into(),
+    })?;
+    let c = Vector3::new(sol[0], sol[1], sol[2]);
+    let r2 = sol[3] + c.norm_squared();
+    if !(r2 > 0.0) || !r2.is_finite() {
+        return Err(CalError::Degenerate {
+            why: "the linear sphere fit found no real radius".into(),
+            fix: "the points do not lie near a sphere: check units and sensor selection".into(),
+        });
+    }
+    let center = m + c * s;
+    let radius = r2.sqrt() * s;
+    let ss: f64 = points
+        .iter()
+        .map(|p| {
+            let d = (Vector3::new(p[0], p[1], p[2]) - center).norm() - radius;
+            d * d
+        })
+        .sum();
+    Ok(LinearSphere { center: [center.x, center.y, center.z], radius, rms: (ss / points.len() as f64).sqrt() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sphere_points(c: [f64; 3], r: f64, n: usize) -> Vec<[f64; 3]> {
+        // a Fibonacci sphere: deterministic and even coverage
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let rr = (1.0 - z * z).sqrt();
+                let t = golden * i as f64;
+                [c[0] + r * rr * t.cos(), c[1] + r * rr * t.sin(), c[2] + r * z]
+            })
+            .collect()
+    }
+
+    fn brute_neighbours(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26] {
+        let mut out = [0.0; 26];
+        for (t, d) in NEIGHBOURS.iter().enumerate() {
+            let cc = [c[0] + h * d[0] as f64, c[1] + h * d[1] as f64, c[2] + h * d[2] as f64];
+            out[t] = error_sum(points, cc, r2);
+        }
+        out
+    }
+
+    #[test]
+    fn neighbour_sums_match_direct_evaluation() {
+        let pts = sphere_points([100.0, -50.0, 20.0], 1000.0, 20_000);
+        for (c, h) in [([0.0, 0.0, 0.0], 1000.0), ([90.0, -45.0, 25.0], 10.0), ([100.0, -50.0, 20.0], 0.01)] {
+            let fast = neighbour_sums(&pts, c, 1e6, h);
+            let slow = brute_neighbours(&pts, c, 1e6, h);
+            for t in 0..26 {
+                assert!((fast[t] - slow[t]).abs() <= 1e-9 * slow[t].max(1.0), "{t}: {} vs {}", fast[t], slow[t]);
+            }
+        }
+    }
+
+    #[test]
+    fn descent_finds_centre_of_exact_sphere() {
+        let pts = sphere_points([123.4, -56.7, 8.9], 16384.0, 500);
+        let d = descend_center(&pts, 16384.0, DescentOptions::default()).unwrap();
+        for k in 0..3 {
+            assert!((d.center[k] - [123.4, -56.7, 8.9][k]).abs() < 0.02, "{:?}", d.center);
+        }
+        assert!(d.converged && d.step < 0.01);
+    }
+
+    #[test]
+    fn grid_matches_descent_at_the_grid_step() {
+        let pts = sphere_points([3.0, -2.0, 1.0], 10.0, 300);
+        let g = grid_center(&pts, 10.0, [-5.0; 3], [5.0; 3], 1.0).unwrap();
+        assert_eq!(g.center, [3.0, -2.0, 1.0]);
+        assert_eq!(g.iterations, 11 * 11 * 11);
+    }
+
+    #[test]
+    fn grid_refuses_huge_work() {
+        let pts = sphere_points([0.0; 3], 1.0, 1000);
+        assert!(matches!(grid_center(&pts, 1.0, [-1e4; 3], [1e4; 3], 0.01), Err(CalError::InvalidArgument(_))));
+    }
+
+    #[test]
+    fn linear_fit_exact() {
+        let pts = sphere_points([1e4, -2e4, 500.0], 16384.0, 100);
+        let f = fit_sphere_linear(&pts).unwrap();
+        assert!((f.center[0] - 1e4).abs() < 1e-6 && (f.radius - 16384.0).abs() < 1e-6);
+        assert!(f.rms < 1e-6);
+    }
+
+    #[test]
+    fn bad_input_is_an_error_not_a_panic() {
+        let mut pts = sphere_points([0.0; 3], 1.0, 10);
+        pts[3][1] = f64::NAN;
+        assert_eq!(fit_sphere_linear(&pts), Err(CalError::NonFinite { index: 3 }));
+        assert!(matches!(fit_sphere_linear(&pts[..2]), Err(CalError::NonFinite { .. }) | Err(CalError::TooFewPoints { .. })));
+        let ok = sphere_points([0.0; 3], 1.0, 10);
+        assert!(matches!(descend_center(&ok, -1.0, DescentOptions::default()), Err(CalError::InvalidArgument(_))));
+        let o = DescentOptions { shrink: 1.0, ..Default::default() };
+        assert!(matches!(descend_center(&ok, 1.0, o), Err(CalError::InvalidArgument(_))));
+    }
+}
