@@ -4,6 +4,7 @@ Fits run in Rust (``triaxcal._core``) with the GIL released; capture, export and
 Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
 """
 
+from . import sim
 from ._core import __version__
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .fit import (
@@ -38,5 +39,6 @@ __all__ = [
     "fit_sphere",
     "fit_sphere_linear",
     "grid_center",
+    "sim",
     "sphere_error",
 ]
