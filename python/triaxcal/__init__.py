@@ -6,6 +6,16 @@ Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multi
 
 from . import sim
 from ._core import __version__
+from .detect import (
+    Pose,
+    PoseDetection,
+    PoseDetector,
+    Rejection,
+    StillDetection,
+    detect_poses,
+    detect_still,
+    still_intervals,
+)
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .fit import (
     MODELS,
@@ -31,9 +41,16 @@ __all__ = [
     "EllipsoidFit",
     "LinearSphere",
     "NonFiniteError",
+    "Pose",
+    "PoseDetection",
+    "PoseDetector",
+    "Rejection",
+    "StillDetection",
     "TooFewPointsError",
     "__version__",
     "descend_center",
+    "detect_poses",
+    "detect_still",
     "fit_batch",
     "fit_ellipsoid",
     "fit_sphere",
@@ -41,4 +58,5 @@ __all__ = [
     "grid_center",
     "sim",
     "sphere_error",
+    "still_intervals",
 ]
