@@ -15,6 +15,7 @@
 //! ```
 
 pub mod batch;
+pub mod bounds;
 pub mod ellipsoid;
 pub mod error;
 pub mod geometry;

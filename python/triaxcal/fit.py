@@ -146,6 +146,7 @@ def fit_ellipsoid(
     max_iter: int = 100,
     tol: float = 1e-12,
     method: str = "lm",
+    debias: bool = True,
 ) -> EllipsoidFit:
     """Fit offset and gain matrix so that calibrated readings have constant magnitude.
 
@@ -169,6 +170,11 @@ def fit_ellipsoid(
         Converged when a step lowers the sum of squares by less than this fraction.
     method : {"lm", "gn", "algebraic"}
         Levenberg-Marquardt, Gauss-Newton, or the algebraic fit alone (no refinement).
+    debias : bool
+        Correct the residual for the length that noise adds to every vector (first order in
+        the noise variance, which is estimated from the residuals). Removes the O(sigma^2)
+        shrinkage of ``matrix`` that every length-based fit has; ``False`` gives the plain
+        geometric least-squares fit.
 
     Returns
     -------
@@ -200,19 +206,29 @@ def fit_ellipsoid(
     max_iter = _as_count(max_iter, "max_iter")
     pts = as_points(points)
     r = as_radius(radius)
-    d = _core.fit_ellipsoid(pts, model=model, radius=r, max_iter=max_iter, tol=float(tol), method=method)
+    d = _core.fit_ellipsoid(
+        pts, model=model, radius=r, max_iter=max_iter, tol=float(tol), method=method,
+        debias=bool(debias),
+    )
     return EllipsoidFit._from_core(d)
 
 
 def fit_sphere(
-    points: Any, *, radius: float | None = None, max_iter: int = 100, tol: float = 1e-12
+    points: Any,
+    *,
+    radius: float | None = None,
+    max_iter: int = 100,
+    tol: float = 1e-12,
+    debias: bool = True,
 ) -> EllipsoidFit:
     """Geometric sphere fit: offset and one scale (``fit_ellipsoid(model="sphere")``).
 
     With ``radius`` given, ``matrix`` is ``radius / data_radius`` times the identity; without
     it, ``matrix`` is the identity and ``radius`` is the data's own.
     """
-    return fit_ellipsoid(points, model="sphere", radius=radius, max_iter=max_iter, tol=tol)
+    return fit_ellipsoid(
+        points, model="sphere", radius=radius, max_iter=max_iter, tol=tol, debias=debias
+    )
 
 
 @dataclass(frozen=True)
@@ -268,6 +284,7 @@ def fit_batch(
     max_iter: int = 100,
     tol: float = 1e-12,
     method: str = "lm",
+    debias: bool = True,
 ) -> BatchFit:
     """Fit many data sets in one call, in parallel (rayon), with the GIL released.
 
@@ -275,7 +292,7 @@ def fit_batch(
     ----------
     sets : array_like (B, N, 3), or a sequence of (Ni, 3) arrays
         One set of raw readings per device.
-    model, radius, max_iter, tol, method
+    model, radius, max_iter, tol, method, debias
         As for :func:`fit_ellipsoid`, applied to every set.
 
     Returns
@@ -306,7 +323,10 @@ def fit_batch(
         bounds = np.zeros(len(parts) + 1, dtype=np.int64)
         bounds[1:] = np.cumsum([len(p) for p in parts])
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
-    d = _core.fit_batch(flat, bounds, model=model, radius=r, max_iter=max_iter, tol=float(tol), method=method)
+    d = _core.fit_batch(
+        flat, bounds, model=model, radius=r, max_iter=max_iter, tol=float(tol), method=method,
+        debias=bool(debias),
+    )
     for k in ("offsets", "matrices", "radii", "rms", "converged", "iterations"):
         d[k].setflags(write=False)
     return BatchFit(

@@ -57,8 +57,16 @@ fn fit_dict<'py>(py: Python<'py>, f: EllipsoidFit) -> PyResult<Bound<'py, PyDict
     Ok(out)
 }
 
-fn options(model: &str, radius: Option<f64>, max_iter: usize, tol: f64, method: &str) -> PyResult<FitOptions> {
+fn options(
+    model: &str,
+    radius: Option<f64>,
+    max_iter: usize,
+    tol: f64,
+    method: &str,
+    debias: bool,
+) -> PyResult<FitOptions> {
     Ok(FitOptions {
+        debias,
         model: py_result(Model::parse(model))?,
         radius,
         max_iter,
@@ -120,7 +128,7 @@ fn fit_sphere_linear(py: Python<'_>, points: PyReadonlyArray2<'_, f64>) -> PyRes
 
 /// Geometric ellipsoid fit; returns a dict of plain values.
 #[pyfunction]
-#[pyo3(signature = (points, *, model, radius, max_iter, tol, method))]
+#[pyo3(signature = (points, *, model, radius, max_iter, tol, method, debias))]
 fn fit_ellipsoid<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
@@ -129,9 +137,10 @@ fn fit_ellipsoid<'py>(
     max_iter: usize,
     tol: f64,
     method: &str,
+    debias: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let pts = self::points(&points)?;
-    let opts = options(model, radius, max_iter, tol, method)?;
+    let opts = options(model, radius, max_iter, tol, method, debias)?;
     let f = py_result(py.detach(|| ellipsoid::fit_ellipsoid(pts, &opts)))?;
     fit_dict(py, f)
 }
@@ -139,7 +148,7 @@ fn fit_ellipsoid<'py>(
 /// Fits many sets: `points` holds them back to back, set i is rows `bounds[i]..bounds[i+1]`.
 /// Returns (offsets (B,3), matrices (B,9), radii, rms, converged, iterations, errors).
 #[pyfunction]
-#[pyo3(signature = (points, bounds, *, model, radius, max_iter, tol, method))]
+#[pyo3(signature = (points, bounds, *, model, radius, max_iter, tol, method, debias))]
 fn fit_batch<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
@@ -149,10 +158,11 @@ fn fit_batch<'py>(
     max_iter: usize,
     tol: f64,
     method: &str,
+    debias: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let pts = self::points(&points)?;
     let b = bounds.as_slice().map_err(|_| CalibrationError::new_err("bounds must be contiguous"))?;
-    let opts = options(model, radius, max_iter, tol, method)?;
+    let opts = options(model, radius, max_iter, tol, method, debias)?;
     let mut sets = Vec::with_capacity(b.len().saturating_sub(1));
     for w in b.windows(2) {
         let (lo, hi) = (w[0], w[1]);
