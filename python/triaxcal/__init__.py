@@ -16,6 +16,7 @@ from .detect import (
     detect_still,
     still_intervals,
 )
+from .calibration import Calibration, SensorCalibration, TemperatureTerms
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .fit import (
     MODELS,
@@ -33,6 +34,9 @@ from .fit import (
 )
 
 __all__ = [
+    "TemperatureTerms",
+    "SensorCalibration",
+    "Calibration",
     "MODELS",
     "BatchFit",
     "CalibrationError",

@@ -1,0 +1,685 @@
+"""Calibration files: one object for the accelerometer, gyroscope and magnetometer parts.
+
+Error model (the same as :mod:`triaxcal.fit`): a raw reading ``raw`` (in ``raw_unit``, usually
+counts) becomes ``calibrated = (raw - offset) @ matrix.T`` (in ``unit``). ``offset`` is the bias
+/ hard iron in raw units; ``matrix`` **multiplies** and carries calibrated units per raw unit
+(scale, cross-axis, soft iron). Optional temperature terms, in ``dT = T - temp_ref_c`` (deg C):
+
+* ``offset(T) = offset + sum_k offset_poly[k] * dT**k``  (raw units; row 0 is usually zero);
+* ``gain(T) = 1 + sum_k gain_poly[k] * dT**k``, per raw axis, which **multiplies** the
+  offset-corrected raw reading before the matrix:
+  ``calibrated = ((raw - offset(T)) * gain(T)) @ matrix.T``.
+
+The JSON file (``"schema": "triaxcal.calibration/1"``) keeps the autopilots' parameter names:
+``offset``, ``diag``, ``offdiag`` (``[xy, xz, yz]``, the upper triangle; a non-symmetric matrix
+adds ``offdiag_lower`` ``[yx, zx, zy]``) and ``radius``. Floats are written with ``repr`` (the
+shortest text that reads back to the same double), so ``load(save(cal)) == cal`` exactly.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from ._core import __version__
+from ._validate import as_points
+from .errors import CalibrationError
+
+__all__ = [
+    "SCHEMA",
+    "SENSORS",
+    "Calibration",
+    "SensorCalibration",
+    "TemperatureTerms",
+    "sha256_points",
+]
+
+SCHEMA_NAME = "triaxcal.calibration"
+SCHEMA_VERSION = 1
+SCHEMA = f"{SCHEMA_NAME}/{SCHEMA_VERSION}"
+SENSORS = ("accel", "gyro", "mag")
+
+_AXES = ("x", "y", "z")
+_UPPER = ((0, 1), (0, 2), (1, 2))  # xy, xz, yz
+_LOWER = ((1, 0), (2, 0), (2, 1))  # yx, zx, zy
+
+
+def _now_utc() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace(
+        "+00:00", "Z"
+    )
+
+
+def sha256_points(points: Any) -> str:
+    """SHA-256 (hex) of readings as little-endian float64, row-major, shape (N, 3).
+
+    The same readings give the same hash whatever dtype they arrived in (int16 counts and
+    their float64 copy agree). For a file, the CLI stores the hash of the file's bytes instead
+    (``sha256sum FILE`` gives the same).
+    """
+    arr = np.ascontiguousarray(as_points(points), dtype="<f8")
+    return hashlib.sha256(arr.tobytes()).hexdigest()
+
+
+def _float(value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise CalibrationError(f"{what} must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise CalibrationError(f"{what} must be finite, got {v}")
+    return v
+
+
+def _array(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{what} must be numbers of shape {shape}, got {value!r}") from None
+    if arr.shape != shape:
+        raise CalibrationError(f"{what} must have shape {shape}, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise CalibrationError(f"{what} must be finite, got {arr.tolist()}")
+    arr.setflags(write=False)
+    return arr
+
+
+def _poly(value: Any, what: str) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{what} must be rows of 3 numbers, got {value!r}") from None
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < 1:
+        raise CalibrationError(
+            f"{what} must have shape (degree + 1, 3), lowest order first; got {arr.shape}"
+        )
+    if not np.isfinite(arr).all():
+        raise CalibrationError(f"{what} must be finite")
+    arr.setflags(write=False)
+    return arr
+
+
+def _jsonable(value: Any, what: str) -> Any:
+    """Deep-copy ``value`` into plain JSON types (dict/list/str/float/int/bool/None)."""
+    if value is None or isinstance(value, (str, bool)):
+        return value
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if not math.isfinite(v):
+            raise CalibrationError(f"{what} must be finite, got {v}")
+        return v
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist(), what)
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v, f"{what}.{k}") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v, what) for v in value]
+    raise CalibrationError(f"{what} holds {type(value).__name__}, which JSON cannot store")
+
+
+def _keys(d: Mapping[str, Any], required: set[str], optional: set[str], what: str) -> None:
+    if not isinstance(d, Mapping):
+        raise CalibrationError(f"{what} must be a JSON object, got {type(d).__name__}")
+    missing = required - set(d)
+    if missing:
+        raise CalibrationError(f"{what} lacks {sorted(missing)}: the file is incomplete")
+    unknown = set(d) - required - optional
+    if unknown:
+        raise CalibrationError(
+            f"{what} has unknown field(s) {sorted(unknown)}; put free-form metadata under "
+            "the top-level 'extra' object"
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class TemperatureTerms:
+    """Polynomial temperature terms of one sensor part, in ``dT = T - temp_ref_c`` (deg C).
+
+    Attributes
+    ----------
+    temp_ref_c : float
+        Reference temperature in deg C (where the main ``offset`` and ``matrix`` hold).
+    temp_range_c : tuple of float
+        ``(lowest, highest)`` temperature of the fitting data, deg C; outside it the polynomial
+        extrapolates.
+    offset_poly : ndarray, shape (degree + 1, 3)
+        Offset change in raw units, lowest order first: ``offset(T) = offset +
+        sum_k offset_poly[k] * dT**k``.
+    gain_poly : ndarray, shape (degree + 1, 3), optional
+        Relative gain change per raw axis, lowest order first; ``1 + sum_k gain_poly[k] *
+        dT**k`` **multiplies** the offset-corrected raw reading.
+    """
+
+    temp_ref_c: float
+    temp_range_c: tuple[float, float]
+    offset_poly: np.ndarray
+    gain_poly: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "temp_ref_c", _float(self.temp_ref_c, "temp_ref_c"))
+        rng = _array(self.temp_range_c, (2,), "temp_range_c")
+        if rng[0] > rng[1]:
+            raise CalibrationError(f"temp_range_c must be (lowest, highest), got {rng.tolist()}")
+        object.__setattr__(self, "temp_range_c", (float(rng[0]), float(rng[1])))
+        object.__setattr__(self, "offset_poly", _poly(self.offset_poly, "offset_poly"))
+        if self.gain_poly is not None:
+            object.__setattr__(self, "gain_poly", _poly(self.gain_poly, "gain_poly"))
+
+    def offset_delta(self, temperature: Any) -> np.ndarray:
+        """Offset change ``sum_k offset_poly[k] * dT**k`` in raw units, shape (N, 3)."""
+        return _horner(self.offset_poly, np.asarray(temperature, float) - self.temp_ref_c)
+
+    def gain(self, temperature: Any) -> np.ndarray:
+        """Per-axis gain factor ``1 + sum_k gain_poly[k] * dT**k`` (multiplies), (N, 3)."""
+        dt = np.asarray(temperature, float) - self.temp_ref_c
+        if self.gain_poly is None:
+            return np.ones((dt.size, 3))
+        return 1.0 + _horner(self.gain_poly, dt)
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {
+            "temp_ref_c": self.temp_ref_c,
+            "temp_range_c": list(self.temp_range_c),
+            "offset_poly": self.offset_poly.tolist(),
+        }
+        if self.gain_poly is not None:
+            d["gain_poly"] = self.gain_poly.tolist()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> TemperatureTerms:
+        _keys(d, {"temp_ref_c", "temp_range_c", "offset_poly"}, {"gain_poly"}, "temperature")
+        return cls(
+            temp_ref_c=d["temp_ref_c"],
+            temp_range_c=d["temp_range_c"],
+            offset_poly=d["offset_poly"],
+            gain_poly=d.get("gain_poly"),
+        )
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, TemperatureTerms) and self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def _horner(poly: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    dt = np.atleast_1d(dt).reshape(-1, 1)
+    acc = np.zeros((dt.shape[0], 3)) + poly[-1]
+    for row in poly[-2::-1]:
+        acc = acc * dt + row
+    return acc
+
+
+@dataclass(frozen=True, eq=False)
+class SensorCalibration:
+    """Calibration of one three-axis sensor: ``calibrated = (raw - offset) @ matrix.T``.
+
+    Attributes
+    ----------
+    offset : ndarray, shape (3,)
+        Bias / hard iron, in ``raw_unit``.
+    matrix : ndarray, shape (3, 3)
+        Gain matrix that **multiplies**, in ``unit`` per ``raw_unit``.
+    raw_unit : str
+        Unit of raw readings, e.g. ``"counts"``.
+    unit : str
+        Unit of calibrated readings: ``"g"``, ``"m/s^2"``, ``"deg/s"``, ``"rad/s"``, ``"uT"``...
+    radius : float, optional
+        Magnitude calibrated readings should have (1 for g, the local field in uT), if known.
+    model : str, optional
+        Fit model: ``"sphere"``, ``"axis"``, ``"full"`` (or another name for hand-made parts).
+    temperature : TemperatureTerms, optional
+        Temperature terms; :meth:`apply` then needs the temperature in deg C.
+    stats : dict
+        Fit statistics (``rms``, ``n``, ``stderr`` by parameter name, ``rejected`` indices,
+        norm statistics, coverage...), plain JSON values.
+    input_sha256 : str, optional
+        SHA-256 of the input data (see :func:`sha256_points`), for provenance.
+    source : str, optional
+        Where the data came from (a file name), for provenance.
+    """
+
+    offset: np.ndarray
+    matrix: np.ndarray
+    raw_unit: str = "counts"
+    unit: str = "counts"
+    radius: float | None = None
+    model: str | None = None
+    temperature: TemperatureTerms | None = None
+    stats: dict[str, Any] = field(default_factory=dict)
+    input_sha256: str | None = None
+    source: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "offset", _array(self.offset, (3,), "offset"))
+        object.__setattr__(self, "matrix", _array(self.matrix, (3, 3), "matrix"))
+        for name in ("raw_unit", "unit"):
+            v = getattr(self, name)
+            if not isinstance(v, str) or not v.strip():
+                raise CalibrationError(f"{name} must be a unit name such as 'counts' or 'g'")
+        if abs(np.linalg.det(self.matrix)) < 1e-300:
+            raise CalibrationError("matrix is singular: it would map readings to a plane")
+        if self.radius is not None:
+            r = _float(self.radius, "radius")
+            if r <= 0:
+                raise CalibrationError(f"radius must be greater than zero, got {r}")
+            object.__setattr__(self, "radius", r)
+        if self.temperature is not None and not isinstance(self.temperature, TemperatureTerms):
+            object.__setattr__(self, "temperature", TemperatureTerms.from_dict(self.temperature))
+        object.__setattr__(self, "stats", _jsonable(dict(self.stats), "stats"))
+        for name in ("model", "input_sha256", "source"):
+            v = getattr(self, name)
+            if v is not None and not isinstance(v, str):
+                raise CalibrationError(f"{name} must be a string or None, got {v!r}")
+
+    # -- constructors ---------------------------------------------------------------------
+    @classmethod
+    def from_fit(
+        cls,
+        fit: Any,
+        *,
+        raw_unit: str = "counts",
+        unit: str | None = None,
+        points: Any = None,
+        rejected: Any = (),
+        temperature: TemperatureTerms | None = None,
+        input_sha256: str | None = None,
+        source: str | None = None,
+        extra_stats: Mapping[str, Any] | None = None,
+    ) -> SensorCalibration:
+        """Build a part from an :class:`~triaxcal.EllipsoidFit`.
+
+        Parameters
+        ----------
+        fit : EllipsoidFit
+            The fit (``offset``, ``matrix``, ``radius``, ``rms``, ``stderr``...).
+        raw_unit : str
+            Unit of the fitted readings (default ``"counts"``).
+        unit : str, optional
+            Unit of calibrated readings, e.g. ``"g"`` when the fit used ``radius=1.0``.
+            Defaults to ``raw_unit`` (a fit without a radius keeps the data's scale).
+        points : array_like (N, 3), optional
+            The raw readings fitted; adds calibrated-norm statistics and, unless
+            ``input_sha256`` is given, their hash.
+        rejected : sequence of int
+            Indices of readings rejected as outliers before the fit (recorded in ``stats``).
+        temperature : TemperatureTerms, optional
+        input_sha256, source : str, optional
+            Provenance.
+        extra_stats : mapping, optional
+            More statistics to record (e.g. the model-selection reason).
+
+        Examples
+        --------
+        >>> import numpy as np, triaxcal as tc
+        >>> pts = np.array([[2, 0, 0], [0, 1, 0], [0, -1, 0], [1, 0, 1], [1, 0, -1], [1, 1, 0.1]])
+        >>> part = tc.SensorCalibration.from_fit(tc.fit_sphere(pts, radius=1.0), unit="g")
+        >>> part.unit, np.round(part.offset, 6).tolist()
+        ('g', [1.0, 0.0, 0.0])
+        """
+        stderr = getattr(fit, "stderr", np.zeros(0))
+        names = getattr(fit, "param_names", ())
+        stats: dict[str, Any] = {
+            "model": fit.model,
+            "n": int(fit.n),
+            "rms": float(fit.rms),
+            "radius": float(fit.radius),
+            "rms_pct_of_radius": 100.0 * float(fit.rms) / float(fit.radius),
+            "iterations": int(fit.iterations),
+            "converged": bool(fit.converged),
+            "condition": float(fit.condition) if math.isfinite(fit.condition) else None,
+            "stderr": {str(k): float(v) for k, v in zip(names, stderr)},
+            "warnings": list(fit.warnings),
+            "rejected": [int(i) for i in np.asarray(rejected, dtype=np.int64).ravel()],
+        }
+        if points is not None:
+            pts = as_points(points)
+            norms = np.linalg.norm(fit.apply(pts), axis=1)
+            stats["norms"] = _norm_stats(norms)
+            if input_sha256 is None:
+                input_sha256 = sha256_points(pts)
+        if extra_stats:
+            stats.update(_jsonable(dict(extra_stats), "extra_stats"))
+        return cls(
+            offset=fit.offset,
+            matrix=fit.matrix,
+            raw_unit=raw_unit,
+            unit=raw_unit if unit is None else unit,
+            radius=float(fit.radius),
+            model=fit.model,
+            temperature=temperature,
+            stats=stats,
+            input_sha256=input_sha256,
+            source=source,
+        )
+
+    # -- use ------------------------------------------------------------------------------
+    def apply(self, raw: Any, temperature: Any = None) -> np.ndarray:
+        """Calibrate raw readings: ``((raw - offset(T)) * gain(T)) @ matrix.T``.
+
+        Parameters
+        ----------
+        raw : array_like, shape (N, 3) or (3,)
+            Readings in ``raw_unit``.
+        temperature : float or array_like (N,), optional
+            Sensor temperature in deg C; required when the part has temperature terms (pass
+            ``temp_ref_c`` to skip the correction on purpose).
+
+        Returns
+        -------
+        ndarray
+            Calibrated readings in ``unit``, the shape of ``raw``.
+        """
+        arr = np.asarray(raw)
+        single = arr.ndim == 1
+        pts = as_points(arr.reshape(1, -1) if single else arr, name="raw")
+        if not np.isfinite(pts).all():
+            raise CalibrationError("raw readings must be finite (no NaN or inf)")
+        d = pts - self.offset
+        if self.temperature is not None:
+            if temperature is None:
+                raise CalibrationError(
+                    "this calibration has temperature terms: pass temperature= in deg C (or "
+                    f"temperature={self.temperature.temp_ref_c} to skip the correction)"
+                )
+            t = np.asarray(temperature, dtype=np.float64).ravel()
+            if t.size not in (1, pts.shape[0]) or not np.isfinite(t).all():
+                raise CalibrationError(
+                    f"temperature must be one finite number or one per reading ({pts.shape[0]}),"
+                    f" got {t.size} values"
+                )
+            t = np.broadcast_to(t, (pts.shape[0],))
+            d = (d - self.temperature.offset_delta(t)) * self.temperature.gain(t)
+        out = d @ self.matrix.T
+        return out[0] if single else out
+
+    @property
+    def diag(self) -> np.ndarray:
+        """Diagonal of ``matrix`` (per-axis gain), calibrated units per raw unit."""
+        return np.diag(self.matrix).copy()
+
+    @property
+    def offdiag(self) -> np.ndarray:
+        """Upper off-diagonal terms ``[xy, xz, yz]`` of ``matrix``."""
+        return np.array([self.matrix[i, j] for i, j in _UPPER])
+
+    @property
+    def symmetric(self) -> bool:
+        """Whether ``matrix`` is exactly symmetric (as every ellipsoid fit returns)."""
+        return all(self.matrix[i, j] == self.matrix[j, i] for i, j in _UPPER)
+
+    # -- JSON -----------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON form (the ``parts.<sensor>`` object of the file)."""
+        d: dict[str, Any] = {
+            "raw_unit": self.raw_unit,
+            "unit": self.unit,
+            "offset": self.offset.tolist(),
+            "diag": self.diag.tolist(),
+            "offdiag": self.offdiag.tolist(),
+        }
+        if not self.symmetric:
+            d["offdiag_lower"] = [float(self.matrix[i, j]) for i, j in _LOWER]
+        d["radius"] = self.radius
+        d["model"] = self.model
+        d["temperature"] = None if self.temperature is None else self.temperature.to_dict()
+        d["input_sha256"] = self.input_sha256
+        d["source"] = self.source
+        d["stats"] = self.stats
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], what: str = "part") -> SensorCalibration:
+        """Inverse of :meth:`to_dict`; raises :class:`CalibrationError` when malformed."""
+        _keys(
+            d,
+            {"raw_unit", "unit", "offset", "diag", "offdiag"},
+            {"offdiag_lower", "radius", "model", "temperature", "input_sha256", "source", "stats"},
+            what,
+        )
+        diag = _array(d["diag"], (3,), f"{what}.diag")
+        upper = _array(d["offdiag"], (3,), f"{what}.offdiag")
+        lower = upper
+        if d.get("offdiag_lower") is not None:
+            lower = _array(d["offdiag_lower"], (3,), f"{what}.offdiag_lower")
+        m = np.diag(diag)
+        for k, (i, j) in enumerate(_UPPER):
+            m[i, j] = upper[k]
+            m[j, i] = lower[k]
+        temp = d.get("temperature")
+        stats = d.get("stats") or {}
+        if not isinstance(stats, Mapping):
+            raise CalibrationError(f"{what}.stats must be a JSON object")
+        try:
+            return cls(
+                offset=_array(d["offset"], (3,), f"{what}.offset"),
+                matrix=m,
+                raw_unit=d["raw_unit"],
+                unit=d["unit"],
+                radius=d.get("radius"),
+                model=d.get("model"),
+                temperature=None if temp is None else TemperatureTerms.from_dict(temp),
+                stats=dict(stats),
+                input_sha256=d.get("input_sha256"),
+                source=d.get("source"),
+            )
+        except CalibrationError as exc:
+            raise CalibrationError(f"{what}: {exc}") from None
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, SensorCalibration) and self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        off = ", ".join(f"{v:.6g}" for v in self.offset)
+        diag = ", ".join(f"{v:.6g}" for v in self.diag)
+        t = ", temperature" if self.temperature is not None else ""
+        return (
+            f"SensorCalibration({self.raw_unit} -> {self.unit}, model={self.model!r}, "
+            f"offset=[{off}], diag=[{diag}], radius={self.radius}{t})"
+        )
+
+
+def _norm_stats(norms: np.ndarray) -> dict[str, float]:
+    mean = float(np.mean(norms))
+    std = float(np.std(norms, ddof=1)) if norms.size > 1 else 0.0
+    return {
+        "min": float(np.min(norms)),
+        "max": float(np.max(norms)),
+        "mean": mean,
+        "std": std,
+        "std_over_mean": std / mean if mean else float("nan"),
+    }
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Calibration of a board: any of the ``accel``, ``gyro`` and ``mag`` parts, with provenance.
+
+    Attributes
+    ----------
+    accel, gyro, mag : SensorCalibration, optional
+        The parts present.
+    sensor_id : str
+        Which board / sensor this belongs to (free text, e.g. a serial number).
+    created_utc : str
+        Creation time, UTC, ISO 8601 (``2026-01-02T03:04:05Z``).
+    library_version : str
+        ``triaxcal.__version__`` that made it.
+    extra : dict
+        Free-form JSON metadata.
+
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> part = tc.SensorCalibration(offset=[10, 0, 0], matrix=np.eye(3) / 16384, unit="g")
+    >>> cal = tc.Calibration(accel=part, sensor_id="board-1")
+    >>> cal.apply([[16394, 0, 0]], sensor="accel").tolist()
+    [[1.0, 0.0, 0.0]]
+    >>> tc.Calibration.from_json(cal.to_json()) == cal
+    True
+    """
+
+    accel: SensorCalibration | None = None
+    gyro: SensorCalibration | None = None
+    mag: SensorCalibration | None = None
+    sensor_id: str = ""
+    created_utc: str = field(default_factory=_now_utc)
+    library_version: str = __version__
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in SENSORS:
+            part = getattr(self, name)
+            if part is not None and not isinstance(part, SensorCalibration):
+                raise CalibrationError(
+                    f"{name} must be a SensorCalibration (or None), got {type(part).__name__}"
+                )
+        if not any(getattr(self, s) is not None for s in SENSORS):
+            raise CalibrationError("a Calibration needs at least one of accel, gyro, mag")
+        for name in ("sensor_id", "created_utc", "library_version"):
+            if not isinstance(getattr(self, name), str):
+                raise CalibrationError(f"{name} must be a string")
+        object.__setattr__(self, "extra", _jsonable(dict(self.extra), "extra"))
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """Names of the parts present, in the order accel, gyro, mag."""
+        return tuple(s for s in SENSORS if getattr(self, s) is not None)
+
+    def part(self, sensor: str) -> SensorCalibration:
+        """The part for ``sensor``; a clear error if it is missing."""
+        if sensor not in SENSORS:
+            raise CalibrationError(f"unknown sensor {sensor!r}: use one of {SENSORS}")
+        p = getattr(self, sensor)
+        if p is None:
+            raise CalibrationError(
+                f"this calibration has no {sensor} part (it has: {', '.join(self.sensors)})"
+            )
+        return p
+
+    def apply(self, raw: Any, sensor: str = "accel", temperature: Any = None) -> np.ndarray:
+        """Calibrate ``raw`` (N, 3) readings of ``sensor``; see :meth:`SensorCalibration.apply`."""
+        return self.part(sensor).apply(raw, temperature=temperature)
+
+    def replace(self, **changes: Any) -> Calibration:
+        """A copy with some fields changed (e.g. ``cal.replace(mag=part)``)."""
+        d = {k: getattr(self, k) for k in (*SENSORS, "sensor_id", "created_utc",
+                                            "library_version", "extra")}
+        d.update(changes)
+        return Calibration(**d)
+
+    # -- JSON -----------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "schema": SCHEMA,
+            "sensor_id": self.sensor_id,
+            "created_utc": self.created_utc,
+            "library_version": self.library_version,
+            "parts": {s: getattr(self, s).to_dict() for s in self.sensors},
+            "extra": self.extra,
+        }
+
+    def to_json(self) -> str:
+        """JSON text (2-space indent, floats as ``repr``: exact round trip)."""
+        return json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n"
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Calibration:
+        """Inverse of :meth:`to_dict`; raises :class:`CalibrationError` when malformed."""
+        if not isinstance(d, Mapping):
+            raise CalibrationError("a calibration file must hold a JSON object")
+        _check_schema(d.get("schema"))
+        _keys(
+            d,
+            {"schema", "parts"},
+            {"sensor_id", "created_utc", "library_version", "extra"},
+            "calibration",
+        )
+        parts = d["parts"]
+        if not isinstance(parts, Mapping):
+            raise CalibrationError("'parts' must be a JSON object keyed by accel/gyro/mag")
+        unknown = set(parts) - set(SENSORS)
+        if unknown:
+            raise CalibrationError(f"unknown sensor part(s) {sorted(unknown)}: use {SENSORS}")
+        kw = {s: SensorCalibration.from_dict(parts[s], s) for s in SENSORS if s in parts}
+        extra = d.get("extra") or {}
+        if not isinstance(extra, Mapping):
+            raise CalibrationError("'extra' must be a JSON object")
+        return cls(
+            **kw,
+            sensor_id=d.get("sensor_id", ""),
+            created_utc=d.get("created_utc", ""),
+            library_version=d.get("library_version", ""),
+            extra=dict(extra),
+        )
+
+    @classmethod
+    def from_json(cls, text: str) -> Calibration:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise CalibrationError(
+                f"not a calibration file: invalid JSON ({exc}); write it with cal.save(path) "
+                "or `triaxcal fit`"
+            ) from None
+        return cls.from_dict(d)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Calibration:
+        """Read a calibration file written by :meth:`save` (or by ``triaxcal fit``)."""
+        p = Path(path)
+        try:
+            text = p.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise CalibrationError(f"calibration file {p} not found") from None
+        except UnicodeDecodeError:
+            raise CalibrationError(f"{p} is not a text (JSON) calibration file") from None
+        try:
+            return cls.from_json(text)
+        except CalibrationError as exc:
+            raise CalibrationError(f"{p}: {exc}") from None
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the calibration as JSON to ``path`` (atomically: temp file, then rename)."""
+        p = Path(path)
+        tmp = p.with_name(p.name + ".tmp")
+        tmp.write_text(self.to_json(), encoding="utf-8")
+        os.replace(tmp, p)
+        return p
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Calibration) and self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        parts = ", ".join(f"{s}={getattr(self, s)!r}" for s in self.sensors)
+        return f"Calibration(sensor_id={self.sensor_id!r}, {parts})"
+
+
+def _check_schema(schema: Any) -> None:
+    if not isinstance(schema, str) or not schema.startswith(SCHEMA_NAME + "/"):
+        raise CalibrationError(
+            f"not a triaxcal calibration file: 'schema' is {schema!r}, expected {SCHEMA!r}"
+        )
+    ver = schema[len(SCHEMA_NAME) + 1:]
+    if not ver.isdigit():
+        raise CalibrationError(f"malformed schema version in {schema!r}, expected {SCHEMA!r}")
+    if int(ver) > SCHEMA_VERSION:
+        raise CalibrationError(
+            f"this file uses schema {schema!r}, newer than this triaxcal ({__version__}) reads "
+            f"({SCHEMA!r}): upgrade triaxcal (pip install -U triaxcal)"
+        )
+    if int(ver) < 1:
+        raise CalibrationError(f"unknown schema version in {schema!r}")
