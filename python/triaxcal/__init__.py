@@ -32,8 +32,26 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .gyro import (
+    GyroBias,
+    GyroGains,
+    Rotation,
+    TurntableFit,
+    find_rotations,
+    fit_turntable,
+    gyro_bias,
+    gyro_gains,
+)
 
 __all__ = [
+    "gyro_gains",
+    "gyro_bias",
+    "fit_turntable",
+    "find_rotations",
+    "TurntableFit",
+    "Rotation",
+    "GyroGains",
+    "GyroBias",
     "TemperatureTerms",
     "SensorCalibration",
     "Calibration",

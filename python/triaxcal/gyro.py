@@ -1,0 +1,581 @@
+"""Gyroscope calibration: bias at rest, gain by integrating known rotations, turntable fits.
+
+Error model (per axis, the seed gyro-integration-calibration.txt): a raw reading ``w`` (counts)
+of a true rate ``r`` (deg/s) is ``w = offset + gain * r``; ``gain`` is in **counts per deg/s**
+and **divides**: ``r = (w - offset) / gain``. Its inverse, ``scale = 1 / gain`` in **deg/s per
+count**, multiplies. (The seed's readers mixed the two up: MPU-6050 at +-2000 deg/s has a
+gain of 16.4 counts per deg/s, i.e. a scale of 0.061 deg/s per count.) The full 3x3 model,
+``rate = (w - offset) @ matrix.T`` with ``matrix`` in rad/s per count, is fitted by
+:func:`triaxcal.calibrate_imu` (rotations between still poses) and :func:`fit_turntable`
+(constant-rate plateaus of known magnitude).
+
+Rotation sense: a rotation with a positive integral about +axis is counterclockwise seen from
+the tip of that axis (right-hand rule), ``"ccw"``; a negative one is clockwise, ``"cw"``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .detect import Rejection, detect_poses, detect_still
+from .errors import CalibrationError
+
+__all__ = [
+    "GyroBias",
+    "GyroGains",
+    "Rotation",
+    "TurntableFit",
+    "find_rotations",
+    "fit_turntable",
+    "gyro_bias",
+    "gyro_gains",
+    "integrate_rate",
+    "turntable_plateaus",
+]
+
+AXES = "xyz"
+TOO_SMALL = "rotation too small"
+TOO_LARGE = "rotation too large"
+NOT_ONE_AXIS = "not about one axis"
+
+
+def _ro(a: Any) -> np.ndarray:
+    arr = np.array(a, dtype=np.float64)
+    arr.setflags(write=False)
+    return arr
+
+
+def _as_rate(gyro: Any, name: str = "gyro") -> np.ndarray:
+    try:
+        arr = np.asarray(gyro)
+    except (ValueError, TypeError) as exc:
+        raise CalibrationError(f"{name} must be an (N, 3) array of numbers ({exc})") from None
+    if arr.dtype.kind not in "iuf":
+        raise CalibrationError(f"{name} must hold real numbers, got dtype {arr.dtype}")
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise CalibrationError(f"{name} must have shape (N, 3), one row per sample; got {arr.shape}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
+        raise CalibrationError(f"{name} contains NaN or inf (first at row {bad}); repair or drop it")
+    if arr.shape[0] < 2:
+        raise CalibrationError(f"{name} needs at least 2 samples, got {arr.shape[0]}")
+    return arr
+
+
+def _times(n: int, t: Any, rate_hz: float | None) -> np.ndarray:
+    if t is not None:
+        tt = np.asarray(t, dtype=np.float64).reshape(-1)
+        if tt.shape[0] != n:
+            raise CalibrationError(f"t has {tt.shape[0]} time stamps for {n} samples")
+        if not np.isfinite(tt).all() or np.any(np.diff(tt) <= 0):
+            raise CalibrationError("t must be finite and strictly increasing (seconds)")
+        return tt
+    if rate_hz is None:
+        raise CalibrationError("give the sample time stamps t (s) or the sampling rate rate_hz")
+    rate = float(rate_hz)
+    if not (np.isfinite(rate) and rate > 0):
+        raise CalibrationError(f"rate_hz must be > 0, got {rate_hz!r}")
+    return np.arange(n) / rate
+
+
+def integrate_rate(rate: Any, t: Any) -> np.ndarray:
+    """Cumulative trapezoid integral of ``rate`` (N, 3) over time stamps ``t`` (N,).
+
+    Returns an (N, 3) array starting at zero, in rate units times seconds (counts * s for raw
+    readings, deg for deg/s). ``out[b] - out[a]`` is the integral from sample a to sample b.
+    """
+    r = np.asarray(rate, dtype=np.float64)
+    tt = np.asarray(t, dtype=np.float64)
+    out = np.zeros_like(r)
+    out[1:] = np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(tt)[:, None], axis=0)
+    return out
+
+
+@dataclass(frozen=True)
+class GyroBias:
+    """Gyro bias from still periods: ``offset`` (3,) and ``std`` (3,) in the input's units
+    (counts, or deg/s), over ``n`` samples of ``intervals``."""
+
+    offset: np.ndarray
+    std: np.ndarray
+    n: int
+    intervals: tuple[tuple[int, int], ...]
+
+
+def gyro_bias(
+    gyro: Any,
+    *,
+    intervals: Sequence[tuple[int, int]] | None = None,
+    rate_hz: float | None = None,
+    rest_s: float = 3.0,
+) -> GyroBias:
+    """Gyro offset (bias) as the mean reading while the sensor is still.
+
+    Parameters
+    ----------
+    gyro : array_like, shape (N, 3)
+        Raw gyro readings (counts, or deg/s, rad/s).
+    intervals : sequence of (start, end), optional
+        Still intervals (sample indices, end exclusive). ``None``: with ``rate_hz`` given, they
+        are found by :func:`triaxcal.detect_still` (the first ``rest_s`` seconds must be
+        still); without it, the whole recording is taken as still.
+    rate_hz : float, optional
+        Sampling rate, Hz, for the detection.
+    rest_s : float
+        Initial rest, s, that teaches the detector the noise floor.
+
+    Returns
+    -------
+    GyroBias
+    """
+    g = _as_rate(gyro)
+    if intervals is None:
+        if rate_hz is None:
+            iv = [(0, g.shape[0])]
+        else:
+            iv = detect_still(g, rate_hz=rate_hz, rest_s=rest_s, window_s=min(1.0, rest_s)).intervals
+    else:
+        iv = [(int(a), int(b)) for a, b in intervals]
+    iv = [(max(a, 0), min(b, g.shape[0])) for a, b in iv if min(b, g.shape[0]) > max(a, 0)]
+    if not iv:
+        raise CalibrationError(
+            "no still period in the gyro recording: leave the sensor at rest for a few seconds "
+            "(at the start, to teach the detector its noise) and record again"
+        )
+    rows = np.concatenate([g[a:b] for a, b in iv])
+    return GyroBias(_ro(rows.mean(axis=0)), _ro(rows.std(axis=0)), int(rows.shape[0]), tuple(iv))
+
+
+@dataclass(frozen=True)
+class Rotation:
+    """One rotation between two still periods.
+
+    Attributes
+    ----------
+    start, end : int
+        Samples integrated (``end`` exclusive): from the last still sample before the motion to
+        the first still sample after it.
+    integral : ndarray, shape (3,)
+        Integral of ``gyro - offset`` over the rotation, in raw units times seconds (counts*s;
+        degrees when the gyro is in deg/s).
+    axis : int
+        Index (0, 1, 2 = x, y, z) of the dominant component.
+    direction : str
+        ``"ccw"`` (positive integral about +axis, right-hand rule) or ``"cw"``.
+    purity : float
+        ``|integral[axis]| / |integral|``: 1 for a rotation about one sensor axis.
+    """
+
+    start: int
+    end: int
+    integral: np.ndarray
+    axis: int
+    direction: str
+    purity: float
+
+    @property
+    def label(self) -> str:
+        """``"x ccw"``, ``"z cw"``, ..."""
+        return f"{AXES[self.axis]} {self.direction}"
+
+
+def find_rotations(
+    gyro: Any,
+    *,
+    t: Any = None,
+    rate_hz: float | None = None,
+    offset: Any = None,
+    intervals: Sequence[tuple[int, int]] | None = None,
+    rest_s: float = 3.0,
+    window_s: float = 0.5,
+    k: float = 4.0,
+    min_still_s: float = 0.5,
+) -> list[Rotation]:
+    """Find the rotations between still periods and integrate each one.
+
+    Still periods come from ``intervals`` or from the variance detector run on the gyro itself
+    (the first ``rest_s`` seconds must be still). Every gap between two still periods is a
+    rotation; ``gyro - offset`` is integrated over it with the trapezoid rule on the time
+    stamps ``t`` (or a uniform ``rate_hz``).
+
+    Returns
+    -------
+    list of Rotation
+    """
+    g = _as_rate(gyro)
+    tt = _times(g.shape[0], t, rate_hz)
+    rate = 1.0 / float(np.median(np.diff(tt)))
+    if intervals is None:
+        iv = detect_still(g, rate_hz=rate, window_s=window_s, rest_s=rest_s, k=k,
+                          min_duration_s=min_still_s).intervals
+    else:
+        iv = sorted((int(a), int(b)) for a, b in intervals)
+    if len(iv) < 2:
+        raise CalibrationError(
+            f"found {len(iv)} still period(s); rotations are measured between two still periods: "
+            "hold the sensor still before and after every rotation"
+        )
+    off = gyro_bias(g, intervals=iv).offset if offset is None else np.asarray(offset, float)
+    cum = integrate_rate(g - off, tt)
+    out = []
+    for (_, e0), (s1, _) in zip(iv[:-1], iv[1:]):
+        a, b = max(e0 - 1, 0), min(s1 + 1, g.shape[0])
+        if b - a < 2:
+            continue
+        integ = cum[b - 1] - cum[a]
+        ax = int(np.argmax(np.abs(integ)))
+        norm = float(np.linalg.norm(integ))
+        purity = abs(float(integ[ax])) / norm if norm > 0 else 0.0
+        out.append(Rotation(a, b, _ro(integ), ax, "ccw" if integ[ax] > 0 else "cw", purity))
+    return out
+
+
+@dataclass(frozen=True)
+class GyroGains:
+    """Per-axis gyro gains from integrated rotations of a known angle.
+
+    Gains are in **counts per deg/s** and divide: ``rate_dps = (raw - offset) / gain``. The
+    ``*_dps_per_count`` fields are the inverses and multiply. Counts means the raw input
+    units (if the gyro was already in deg/s, a perfect gain is 1).
+
+    Attributes
+    ----------
+    offset : ndarray (3,)
+        Bias, raw units.
+    gain_ccw_counts_per_dps, gain_cw_counts_per_dps : ndarray (3,)
+        Mean gain of the counterclockwise / clockwise rotations about each axis (NaN where no
+        such rotation was found).
+    gain_counts_per_dps : ndarray (3,)
+        Mean of the two directions (or the one available).
+    scale_dps_per_count : ndarray (3,)
+        ``1 / gain_counts_per_dps``.
+    asymmetry : ndarray (3,)
+        ``(ccw - cw) / mean`` gain, a check on the rotations (NaN if one direction is missing).
+    rotations : tuple of Rotation
+        Rotations used.
+    rejected : tuple of Rejection
+        Rotations not used, with the reason (too small, not about one axis).
+    missing : tuple of str
+        Directions with no rotation, e.g. ``("y cw",)``.
+    angle_deg : float
+        The known angle of each rotation.
+    """
+
+    offset: np.ndarray
+    gain_ccw_counts_per_dps: np.ndarray
+    gain_cw_counts_per_dps: np.ndarray
+    gain_counts_per_dps: np.ndarray
+    scale_dps_per_count: np.ndarray
+    asymmetry: np.ndarray
+    rotations: tuple[Rotation, ...]
+    rejected: tuple[Rejection, ...]
+    missing: tuple[str, ...]
+    angle_deg: float
+
+    def apply(self, raw: Any) -> np.ndarray:
+        """Calibrated rates in deg/s: ``(raw - offset) / gain``."""
+        return (np.asarray(raw, dtype=np.float64) - self.offset) / self.gain_counts_per_dps
+
+
+def gyro_gains(
+    gyro: Any,
+    *,
+    angle_deg: float = 90.0,
+    t: Any = None,
+    rate_hz: float | None = None,
+    offset: Any = None,
+    intervals: Sequence[tuple[int, int]] | None = None,
+    rest_s: float = 3.0,
+    min_fraction: float = 0.75,
+    max_fraction: float = 1.25,
+    min_purity: float = 0.9,
+    require_both_directions: bool = False,
+    nominal_counts_per_dps: float | None = None,
+) -> GyroGains:
+    """Gyro gain per axis and direction by integrating rotations of a known angle (the seed).
+
+    Turn the sensor by ``angle_deg`` (90 on a cube; 360 or more is better) about each of its
+    axes, both ways, holding it still before and after each turn. Each rotation is found
+    between still periods, integrated with the trapezoid rule over the time stamps, assigned to
+    its dominant axis and direction, and gives ``gain = |integral| / angle_deg``.
+
+    Parameters
+    ----------
+    gyro : array_like, shape (N, 3)
+        Raw gyro readings (counts).
+    angle_deg : float
+        The known angle of every rotation, degrees.
+    t, rate_hz
+        Time stamps (s), or a uniform sampling rate (Hz).
+    offset : array_like (3,), optional
+        Bias in counts; ``None``: the mean over the still periods.
+    intervals : sequence of (start, end), optional
+        Still periods; ``None``: detected from the gyro (the first ``rest_s`` s must be still).
+    min_fraction, max_fraction : float
+        Rotations whose angle, at a nominal gain taken from the larger rotations, is below
+        ``min_fraction * angle_deg`` or above ``max_fraction * angle_deg`` are rejected as
+        "rotation too small" / "rotation too large" (partial turns, face changes).
+    min_purity : float
+        Rotations with less than this share of the integral on one axis are rejected.
+    require_both_directions : bool
+        Raise unless every axis was turned both ways (the seed's six rotations).
+    nominal_counts_per_dps : float, optional
+        The datasheet gain (131 for an MPU-6050 at +-250 deg/s), used to judge which rotations
+        are too small or too large; ``None``: taken from the larger rotations found.
+
+    Returns
+    -------
+    GyroGains
+
+    Raises
+    ------
+    CalibrationError
+        No still periods, no usable rotation, or an axis (with ``require_both_directions``, a
+        direction) without a rotation; the message lists the missing ones.
+    """
+    ang = float(angle_deg)
+    if not (np.isfinite(ang) and ang > 0):
+        raise CalibrationError(f"angle_deg must be > 0 (90 on a cube), got {angle_deg!r}")
+    rots = find_rotations(gyro, t=t, rate_hz=rate_hz, offset=offset, intervals=intervals,
+                          rest_s=rest_s)
+    g = _as_rate(gyro)
+    if offset is None:
+        tt = _times(g.shape[0], t, rate_hz)
+        iv = intervals
+        if iv is None:
+            iv = detect_still(g, rate_hz=1.0 / float(np.median(np.diff(tt))), window_s=0.5,
+                              rest_s=rest_s, k=4.0, min_duration_s=0.5).intervals
+        off = gyro_bias(g, intervals=iv).offset
+    else:
+        off = _ro(offset)
+    rejected: list[Rejection] = []
+    pure = []
+    for r in rots:
+        if r.purity < min_purity:
+            rejected.append(Rejection(r.start, r.end, NOT_ONE_AXIS,
+                                      f"{r.purity:.2f} of the turn on {AXES[r.axis]}"))
+        else:
+            pure.append(r)
+    mags = np.array([abs(float(r.integral[r.axis])) for r in pure])
+    if len(pure) == 0:
+        raise CalibrationError(
+            "no usable rotation found between still periods: turn the sensor about one of its "
+            f"axes by {ang:g} deg, holding it still before and after"
+        )
+    # nominal gain from the larger turns; smaller ones are partial or accidental moves
+    if nominal_counts_per_dps is None:
+        ref = float(np.median(mags[mags >= 0.5 * mags.max()])) / ang
+    else:
+        ref = float(nominal_counts_per_dps)
+        if not (np.isfinite(ref) and ref > 0):
+            raise CalibrationError(f"nominal_counts_per_dps must be > 0, got {ref!r}")
+    used = []
+    for r, m in zip(pure, mags):
+        if m < min_fraction * ang * ref:
+            rejected.append(Rejection(r.start, r.end, TOO_SMALL,
+                                      f"{m / ref:.3g} deg at the nominal gain, need "
+                                      f">= {min_fraction * ang:g}"))
+        elif m > max_fraction * ang * ref:
+            rejected.append(Rejection(r.start, r.end, TOO_LARGE,
+                                      f"{m / ref:.3g} deg at the nominal gain, need "
+                                      f"<= {max_fraction * ang:g}"))
+        else:
+            used.append(r)
+    gains = {(ax, d): [] for ax in range(3) for d in ("ccw", "cw")}
+    for r in used:
+        gains[(r.axis, r.direction)].append(abs(float(r.integral[r.axis])) / ang)
+    ccw = np.array([np.mean(gains[(a, "ccw")]) if gains[(a, "ccw")] else np.nan for a in range(3)])
+    cw = np.array([np.mean(gains[(a, "cw")]) if gains[(a, "cw")] else np.nan for a in range(3)])
+    missing = tuple(f"{AXES[a]} {d}" for a in range(3) for d in ("ccw", "cw") if not gains[(a, d)])
+    no_axis = [AXES[a] for a in range(3) if np.isnan(ccw[a]) and np.isnan(cw[a])]
+    if no_axis:
+        why = ", ".join(f"{r.reason} at samples {r.start}-{r.end}" for r in rejected)
+        raise CalibrationError(
+            f"no rotation of about {ang:g} deg about {', '.join(no_axis)}: rotations are missing "
+            f"for {', '.join(no_axis)} (used: {', '.join(r.label for r in used) or 'none'}; "
+            f"rejected: {why or 'none'}); turn the sensor about each axis by {ang:g} deg, "
+            "both ways, holding it still before and after"
+        )
+    if require_both_directions and missing:
+        raise CalibrationError(
+            f"rotations missing: {', '.join(missing)}; turn the sensor about each axis by "
+            f"{ang:g} deg clockwise and counterclockwise"
+        )
+    mean = np.where(np.isnan(ccw), cw, np.where(np.isnan(cw), ccw, 0.5 * (ccw + cw)))
+    asym = (ccw - cw) / mean
+    return GyroGains(
+        offset=_ro(off),
+        gain_ccw_counts_per_dps=_ro(ccw),
+        gain_cw_counts_per_dps=_ro(cw),
+        gain_counts_per_dps=_ro(mean),
+        scale_dps_per_count=_ro(1.0 / mean),
+        asymmetry=_ro(asym),
+        rotations=tuple(used),
+        rejected=tuple(rejected),
+        missing=missing,
+        angle_deg=ang,
+    )
+
+
+# --- turntable: constant-rate plateaus of known magnitude --------------------------------------
+
+
+def turntable_plateaus(
+    gyro: Any,
+    *,
+    min_rate: float,
+    window: int = 50,
+    threshold: float | None = None,
+    min_windows: int = 4,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Constant-rate plateaus of a turntable recording: means (M, 3) and sample counts (M,).
+
+    A plateau is a run of windows whose mean rate vector stays within ``threshold`` (input
+    units; default 1 % of ``min_rate``) -- the seed's stillness test applied to the gyro --
+    with a magnitude of at least ``min_rate`` (spin-up, spin-down and reorientation pauses
+    are dropped).
+    """
+    g = _as_rate(gyro)
+    thr = 0.01 * float(min_rate) if threshold is None else float(threshold)
+    det = detect_poses(g, window=window, threshold=thr, min_separation=0.0,
+                       min_windows=min_windows, max_std=10 * thr)
+    keep = [p for p in det.poses if np.linalg.norm(p.mean[:3]) >= min_rate]
+    if not keep:
+        return np.zeros((0, 3)), np.zeros(0, dtype=int)
+    return np.array([p.mean[:3] for p in keep]), np.array([p.n for p in keep])
+
+
+@dataclass(frozen=True)
+class TurntableFit:
+    """Gyro calibration from turntable plateaus of known rate.
+
+    ``calibrated = (raw - offset) @ matrix.T`` is in the units of ``rates`` (rad/s if the rates
+    were given in rad/s); ``matrix`` multiplies. ``measured`` lists each recording's plateau
+    magnitudes after calibration (mean over its plateaus), ``raw_measured`` the same before
+    (offset removed only), ``rel_error`` = measured / rate - 1 per recording.
+    """
+
+    offset: np.ndarray
+    matrix: np.ndarray
+    rates: np.ndarray
+    measured: np.ndarray
+    raw_measured: np.ndarray
+    rel_error: np.ndarray
+    n_plateaus: tuple[int, ...]
+    rms_rel: float
+
+    def apply(self, raw: Any) -> np.ndarray:
+        """``(raw - offset) @ matrix.T``."""
+        return (np.asarray(raw, dtype=np.float64) - self.offset) @ self.matrix.T
+
+
+def fit_turntable(
+    recordings: Sequence[Any],
+    rates: Sequence[float],
+    *,
+    offset: Any,
+    model: str = "full",
+    window: int = 50,
+    min_fraction: float = 0.9,
+) -> TurntableFit:
+    """Fit the gyro gain matrix from turntable recordings of known rate.
+
+    With the sensor placed on a turntable in several orientations, each orientation gives a
+    plateau: a constant body-frame rate vector ``w`` whose true magnitude is the table's rate.
+    With the bias ``offset`` known (from a recording at rest), ``u = (w - offset) / rate``
+    satisfies ``u.T @ A @ u = 1`` with ``A = matrix.T @ matrix``: linear least squares in the
+    six entries of ``A`` (three for ``model="axis"``), then ``matrix`` is the symmetric square
+    root of ``A``.
+
+    Parameters
+    ----------
+    recordings : sequence of array_like (Ni, 3)
+        Gyro readings, one array per turntable speed.
+    rates : sequence of float
+        The true rate of each recording (rad/s for a result in rad/s; 33 1/3 rpm = 3.4907 rad/s).
+    offset : array_like (3,)
+        Gyro bias, in the readings' units (see :func:`gyro_bias`).
+    model : {"full", "axis"}
+        Symmetric 3x3 matrix or per-axis scales.
+    window : int
+        Samples per averaging window of the plateau detection.
+    min_fraction : float
+        Plateaus slower than ``min_fraction * rate`` are spin-up/down and are dropped.
+
+    Returns
+    -------
+    TurntableFit
+    """
+    if model not in ("full", "axis"):
+        raise CalibrationError(f"model must be 'full' or 'axis', got {model!r}")
+    if len(recordings) != len(rates) or len(rates) == 0:
+        raise CalibrationError("give one rate per recording (and at least one recording)")
+    off = np.asarray(offset, dtype=np.float64).reshape(-1)
+    if off.shape != (3,) or not np.isfinite(off).all():
+        raise CalibrationError(f"offset must be 3 finite numbers, got {offset!r}")
+    us, which, counts = [], [], []
+    for i, (rec, rate) in enumerate(zip(recordings, rates)):
+        rate = float(rate)
+        if not (np.isfinite(rate) and rate > 0):
+            raise CalibrationError(f"rates[{i}] must be > 0, got {rate!r}")
+        g = _as_rate(rec, name=f"recordings[{i}]") - off
+        means, _ = turntable_plateaus(g, min_rate=min_fraction * rate, window=window)
+        if len(means) == 0:
+            raise CalibrationError(
+                f"recordings[{i}]: no constant-rate plateau near {rate:g}; is the table turning, "
+                "and is the rate in the gyro's units?"
+            )
+        us.append(means / rate)
+        which += [i] * len(means)
+        counts.append(len(means))
+    u = np.vstack(us)
+    need = 6 if model == "full" else 3
+    if u.shape[0] < need:
+        raise CalibrationError(
+            f"{u.shape[0]} plateaus found, the {model!r} model needs at least {need} orientations "
+            "of the sensor on the table (tilt it differently for each)"
+        )
+    if model == "full":
+        design = np.column_stack([u[:, 0] ** 2, u[:, 1] ** 2, u[:, 2] ** 2, 2 * u[:, 0] * u[:, 1],
+                                  2 * u[:, 0] * u[:, 2], 2 * u[:, 1] * u[:, 2]])
+    else:
+        design = u**2
+    sv = np.linalg.svd(design / np.linalg.norm(design, axis=0), compute_uv=False)
+    if sv[-1] < 1e-6 * sv[0]:
+        raise CalibrationError(
+            "the plateaus do not span enough directions of the rate vector for the "
+            f"{model!r} model: place the sensor on the table in more varied orientations"
+        )
+    coef, *_ = np.linalg.lstsq(design, np.ones(u.shape[0]), rcond=None)
+    if model == "full":
+        a = np.array([[coef[0], coef[3], coef[4]], [coef[3], coef[1], coef[5]],
+                      [coef[4], coef[5], coef[2]]])
+    else:
+        a = np.diag(coef)
+    ev, evec = np.linalg.eigh(a)
+    if ev.min() <= 0:
+        raise CalibrationError("the fitted gain matrix is not positive definite: check the data")
+    m = (evec * np.sqrt(ev)) @ evec.T
+    which_a = np.array(which)
+    cal = np.linalg.norm(u @ m.T, axis=1)
+    rawn = np.linalg.norm(u, axis=1)
+    rr = np.asarray(rates, dtype=np.float64)
+    meas = np.array([cal[which_a == i].mean() for i in range(len(rates))]) * rr
+    rawm = np.array([rawn[which_a == i].mean() for i in range(len(rates))]) * rr
+    return TurntableFit(
+        offset=_ro(off),
+        matrix=_ro(m),
+        rates=_ro(rr),
+        measured=_ro(meas),
+        raw_measured=_ro(rawm),
+        rel_error=_ro(meas / rr - 1),
+        n_plateaus=tuple(counts),
+        rms_rel=float(np.sqrt(np.mean((cal - 1) ** 2))),
+    )
+
+
