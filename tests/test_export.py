@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import triaxcal as tc
 from triaxcal.export import (
     apply_fixed,
@@ -222,7 +221,7 @@ def test_headers_compile_and_link_for_avr(cal, tmp_path):
     elf = tmp_path / "main.elf"
     res = subprocess.run(
         [AVR_GCC, "-mmcu=atmega328p", "-Os", *CFLAGS, "-o", str(elf), str(tmp_path / "main.c")],
-        capture_output=True, text=True,
+        check=False, capture_output=True, text=True,
     )
     assert res.returncode == 0, res.stderr
     assert elf.stat().st_size > 0

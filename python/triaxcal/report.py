@@ -1,0 +1,588 @@
+"""Quality report of a calibration: numbers, plain-language warnings and a PNG figure.
+
+For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T``, the matrix
+**multiplies**, ``|calibrated|`` should be ``radius``) the report gives
+
+* the residual ``|calibrated| - radius``: RMS in calibrated units and in % of the radius;
+* min / max / mean / std of the calibrated norms (the seeds' "descriptive statistics");
+* the standard error of every fitted coefficient (``offset_x``... ``offdiag_yz``);
+* coverage of the sphere: the share of 100 equal-area cells (10 bands of equal height in z,
+  each cut into 10 equal longitude sectors -- by Archimedes' theorem every cell has the same
+  area) that hold at least one calibrated direction;
+* the outliers rejected before the fit, by index;
+* warnings in plain language, each with what to do; the largest empty regions of the sphere
+  are found as the directions farthest from every reading and named in words ("the top of the
+  sphere (+Z) is empty").
+
+:func:`plot_report` draws raw and calibrated points in the XY, XZ and YZ projections with the
+fitted ellipse / circle, a histogram of residuals, the coverage map and the norms over time.
+matplotlib is an optional extra (``pip install triaxcal[plot]``), imported only there, with
+the Agg backend.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._validate import as_points
+from .calibration import SensorCalibration
+from .errors import CalibrationError
+
+__all__ = [
+    "QualityReport",
+    "coverage",
+    "direction_words",
+    "empty_regions",
+    "have_matplotlib",
+    "plot_report",
+    "quality_report",
+]
+
+N_BANDS = 10
+N_SECTORS = 10
+#: An empty cap of the sphere at least this wide (angular radius, degrees) is warned about.
+HOLE_DEG = 40.0
+
+
+def have_matplotlib() -> bool:
+    """Whether the optional ``plot`` extra (matplotlib) is installed."""
+    return importlib.util.find_spec("matplotlib") is not None
+
+
+# --------------------------------------------------------------------------------------------
+# Geometry of directions
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n == 0, 1.0, n)
+
+
+def coverage(
+    directions: Any, *, n_bands: int = N_BANDS, n_sectors: int = N_SECTORS
+) -> tuple[np.ndarray, float]:
+    """Hits per equal-area cell and the percentage of cells hit.
+
+    Cells: ``n_bands`` bands of equal height in ``z`` (equal area on the unit sphere) times
+    ``n_sectors`` equal longitude sectors. ``directions`` (N, 3) need not be unit length.
+
+    Returns
+    -------
+    counts : ndarray, shape (n_bands, n_sectors)
+        Readings per cell; band 0 is the bottom (-Z), sector 0 starts at longitude -180 deg.
+    percent : float
+        Share of cells with at least one reading, in %.
+    """
+    u = _unit(as_points(directions, name="directions"))
+    band = np.clip(((u[:, 2] + 1.0) / 2.0 * n_bands).astype(int), 0, n_bands - 1)
+    lon = np.arctan2(u[:, 1], u[:, 0])
+    sector = np.clip(((lon + np.pi) / (2 * np.pi) * n_sectors).astype(int), 0, n_sectors - 1)
+    counts = np.zeros((n_bands, n_sectors), dtype=np.int64)
+    np.add.at(counts, (band, sector), 1)
+    return counts, 100.0 * float(np.count_nonzero(counts)) / counts.size
+
+
+def _fibonacci(n: int) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r = np.sqrt(1 - z * z)
+    phi = i * math.pi * (3 - math.sqrt(5))
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def empty_regions(
+    directions: Any, *, min_deg: float = HOLE_DEG, max_regions: int = 3
+) -> list[tuple[np.ndarray, float]]:
+    """The largest empty caps of the sphere: ``[(centre unit vector, angular radius deg)]``.
+
+    The centre is the direction farthest (in angle) from every reading; the radius is that
+    angle. Further caps are searched away from the ones found. Only caps of at least
+    ``min_deg`` are returned, largest first.
+    """
+    u = _unit(as_points(directions, name="directions"))
+    cand = _fibonacci(4000)
+    # angular distance to the nearest reading, in chunks to bound memory
+    near = np.empty(len(cand))
+    for s in range(0, len(cand), 500):
+        dots = cand[s:s + 500] @ u.T
+        near[s:s + 500] = np.degrees(np.arccos(np.clip(dots.max(axis=1), -1, 1)))
+    out: list[tuple[np.ndarray, float]] = []
+    alive = np.ones(len(cand), dtype=bool)
+    for _ in range(max_regions):
+        if not alive.any():
+            break
+        i = int(np.argmax(np.where(alive, near, -1)))
+        ang = float(near[i])
+        if ang < min_deg:
+            break
+        out.append((cand[i].copy(), ang))
+        sep = np.degrees(np.arccos(np.clip(cand @ cand[i], -1, 1)))
+        alive &= sep > 1.5 * ang
+    return out
+
+
+_AXIS_WORDS = {
+    (2, 1): "top", (2, -1): "bottom", (0, 1): "+X side", (0, -1): "-X side",
+    (1, 1): "+Y side", (1, -1): "-Y side",
+}
+
+
+def direction_words(v: Any) -> str:
+    """Name a direction: ``"+Z (top)"``, ``"-X (the -X side)"`` or ``"between +X and -Z"``.
+
+    >>> direction_words([0.1, -0.1, 0.99])
+    'the top (+Z)'
+    >>> direction_words([0.7, 0.0, -0.7])
+    'between +X and -Z (bottom)'
+    """
+    v = np.asarray(v, dtype=float)
+    v = v / np.linalg.norm(v)
+    order = np.argsort(-np.abs(v))
+    names = []
+    for k in order:
+        if abs(v[k]) >= 0.5 * abs(v[order[0]]) and abs(v[k]) > 0.3:
+            names.append((int(k), 1 if v[k] > 0 else -1))
+    label = [f"{'+' if s > 0 else '-'}{'XYZ'[k]}" for k, s in names]
+    if len(names) == 1:
+        k, s = names[0]
+        w = _AXIS_WORDS[(k, s)]
+        return f"the {w} ({label[0]})" if k == 2 else f"the {label[0]} side"
+    z = [s for k, s in names if k == 2]
+    extra = f" ({_AXIS_WORDS[(2, z[0])]})" if z else ""
+    return "between " + " and ".join(label) + extra
+
+
+def _axis_phrase(v: np.ndarray) -> str:
+    v = v / np.linalg.norm(v)
+    parts = [f"{'+' if v[k] > 0 else '-'}{'XYZ'[k]}" for k in np.argsort(-np.abs(v))
+             if abs(v[k]) > 0.3]
+    return " / ".join(parts[:2])
+
+
+def _hole_action(sensor: str | None, v: np.ndarray) -> str:
+    ax = _axis_phrase(v)
+    if sensor == "accel":
+        if v[2] > 0.8:
+            how = " (flat, right side up)"
+        elif v[2] < -0.8:
+            how = " (turn the board upside down)"
+        else:
+            how = ""
+        return f"hold the board still with its {ax} axis pointing straight up{how}"
+    if sensor == "mag":
+        return (f"turn the board so that its {ax} axis points along the local magnetic field "
+                "(north, and downward in the northern hemisphere)")
+    if sensor == "gyro":
+        return f"add rotations about the {ax} axis, in the positive sense"
+    return f"add readings with the {ax} direction"
+
+
+# --------------------------------------------------------------------------------------------
+# The report
+
+
+@dataclass(frozen=True)
+class QualityReport:
+    """Numbers of a calibration's quality (see the module docstring); ``text()`` for the console.
+
+    All lengths are in ``unit`` (calibrated units). ``rejected`` are indices into the
+    readings given; statistics use the kept readings.
+    """
+
+    sensor: str | None
+    unit: str
+    model: str | None
+    n: int
+    n_used: int
+    radius: float
+    rms: float
+    rms_pct: float
+    norm_min: float
+    norm_max: float
+    norm_mean: float
+    norm_std: float
+    stderr: dict[str, float]
+    coverage_pct: float
+    cells_hit: int
+    cells_total: int
+    empty: list[tuple[list[float], float, str]]
+    rejected: list[int]
+    warnings: list[str]
+    model_reason: str | None = None
+    raw_unit: str = "counts"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def uniformity(self) -> float:
+        """``norm_std / norm_mean``: 0 for a perfect calibration."""
+        return self.norm_std / self.norm_mean if self.norm_mean else float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON values."""
+        d = asdict(self)
+        d["uniformity"] = self.uniformity
+        return d
+
+    def text(self) -> str:
+        """The report as console text."""
+        u = self.unit
+        name = self.sensor or "sensor"
+        lines = [
+            f"{name} calibration report ({self.raw_unit} -> {u}, model {self.model})",
+            f"  readings        {self.n} ({self.n_used} used, {len(self.rejected)} rejected)",
+            f"  radius          {self.radius:.6g} {u}",
+            f"  residual RMS    {self.rms:.4g} {u} ({self.rms_pct:.3g} % of radius)",
+            (f"  calibrated |v|  min {self.norm_min:.6g}  max {self.norm_max:.6g}  "
+            f"mean {self.norm_mean:.6g}  std {self.norm_std:.4g} {u}  "
+            f"(std/mean {100 * self.uniformity:.3g} %)"),
+            (f"  coverage        {self.coverage_pct:.0f} % of the sphere "
+            f"({self.cells_hit} of {self.cells_total} equal-area cells)"),
+        ]
+        if self.model_reason:
+            lines.append(f"  model choice    {self.model_reason}")
+        if self.stderr:
+            lines.append("  standard errors")
+            for k, v in self.stderr.items():
+                unit = (self.raw_unit if k.startswith("offset") or k == "data_radius"
+                        else f"{u}/{self.raw_unit}" if u != self.raw_unit else "(ratio)")
+                lines.append(f"    {k:<12} {v:.3g} {unit}")
+        if self.rejected:
+            shown = ", ".join(str(i) for i in self.rejected[:30])
+            more = f", ... ({len(self.rejected)} in all)" if len(self.rejected) > 30 else ""
+            lines.append(f"  outliers        rejected readings #{shown}{more}")
+        else:
+            lines.append("  outliers        none rejected")
+        if self.warnings:
+            lines.append("  warnings")
+            lines += [f"    - {w}" for w in self.warnings]
+        else:
+            lines.append("  warnings        none: this calibration looks good")
+        return "\n".join(lines)
+
+
+def _resolve(cal: Any) -> tuple[SensorCalibration, Any]:
+    """(part, fit or None) from a SensorCalibration or an EllipsoidFit."""
+    if isinstance(cal, SensorCalibration):
+        return cal, None
+    if hasattr(cal, "offset") and hasattr(cal, "matrix") and hasattr(cal, "param_names"):
+        return SensorCalibration.from_fit(cal), cal
+    raise CalibrationError(
+        f"expected a SensorCalibration or an EllipsoidFit, got {type(cal).__name__}"
+    )
+
+
+def quality_report(
+    points: Any,
+    cal: Any,
+    *,
+    sensor: str | None = None,
+    rejected: Sequence[int] | None = None,
+    model_reason: str | None = None,
+    temperature: Any = None,
+) -> QualityReport:
+    """Build the :class:`QualityReport` of calibration ``cal`` on raw readings ``points``.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 3)
+        The raw readings (all of them, including any rejected as outliers).
+    cal : SensorCalibration or EllipsoidFit
+        The calibration to judge.
+    sensor : {"accel", "gyro", "mag"}, optional
+        Names the advice ("hold the board with +Z up" for an accelerometer).
+    rejected : sequence of int, optional
+        Indices of readings rejected before the fit. Default: ``cal.stats["rejected"]`` when
+        it fits the number of readings.
+    model_reason : str, optional
+        Why the model was chosen (from :func:`triaxcal.select.fit_auto`).
+    temperature : float or array_like, optional
+        Temperatures (deg C) for parts with temperature terms.
+
+    Returns
+    -------
+    QualityReport
+    """
+    pts = as_points(points)
+    part, fit = _resolve(cal)
+    n = len(pts)
+    if rejected is None:
+        rej = part.stats.get("rejected") or []
+        used = part.stats.get("n")
+        if rej and used is not None and used + len(rej) != n:
+            rej = []  # the stored indices belong to other data
+    else:
+        rej = list(rejected)
+    rej = sorted({int(i) for i in rej})
+    if rej and (rej[0] < 0 or rej[-1] >= n):
+        raise CalibrationError(f"rejected indices must lie in 0..{n - 1}")
+    keep = np.ones(n, dtype=bool)
+    keep[rej] = False
+    if keep.sum() < 2:
+        raise CalibrationError("fewer than 2 readings left after rejection: nothing to report")
+    if part.temperature is not None and temperature is None:
+        temperature = part.temperature.temp_ref_c
+    cal_pts = part.apply(pts, temperature=temperature)
+    norms = np.linalg.norm(cal_pts, axis=1)
+    nk = norms[keep]
+    radius = part.radius if part.radius is not None else float(np.mean(nk))
+    res = nk - radius
+    rms = float(np.sqrt(np.mean(res**2)))
+    counts, cov = coverage(cal_pts[keep])
+    holes = empty_regions(cal_pts[keep])
+    stderr = dict(part.stats.get("stderr") or {})
+    if fit is not None:
+        stderr = fit.stderr_dict
+    warnings = _warnings(part, fit, sensor, n, rej, rms / radius * 100, cov, holes, nk)
+    return QualityReport(
+        sensor=sensor,
+        unit=part.unit,
+        raw_unit=part.raw_unit,
+        model=part.model,
+        n=n,
+        n_used=int(keep.sum()),
+        radius=float(radius),
+        rms=rms,
+        rms_pct=100.0 * rms / radius,
+        norm_min=float(nk.min()),
+        norm_max=float(nk.max()),
+        norm_mean=float(nk.mean()),
+        norm_std=float(nk.std(ddof=1)),
+        stderr={k: float(v) for k, v in stderr.items()},
+        coverage_pct=cov,
+        cells_hit=int(np.count_nonzero(counts)),
+        cells_total=int(counts.size),
+        empty=[(c.tolist(), a, direction_words(c)) for c, a in holes],
+        rejected=rej,
+        warnings=warnings,
+        model_reason=model_reason or part.stats.get("model_reason"),
+    )
+
+
+def _warnings(part: SensorCalibration, fit: Any, sensor: str | None, n: int, rej: list[int],
+              rms_pct: float, cov: float, holes: list, norms: np.ndarray) -> list[str]:
+    w: list[str] = []
+    for c, ang in holes:
+        w.append(
+            f"{direction_words(c)} of the sphere is empty (no reading within {ang:.0f} deg of "
+            f"it): {_hole_action(sensor, c)}, then fit again"
+        )
+    if cov < 50:
+        w.append(
+            f"only {cov:.0f} % of the sphere is covered: tumble the board through many more "
+            "orientations (all six faces up and the corners in between)"
+        )
+    if n - len(rej) < 30:
+        w.append(
+            f"only {n - len(rej)} readings were used: collect at least 30 (better 100+) spread "
+            "over the sphere"
+        )
+    limit = 3.0 if sensor != "accel" else 2.0
+    if rms_pct > limit:
+        what = ("readings taken while the board moved (accelerations add to gravity): hold the "
+                "board still in each pose, or fit a capture with --poses" if sensor == "accel"
+                else "noise, motion or magnetic disturbances (metal, motors, cables nearby): "
+                "calibrate away from them and move slowly" if sensor == "mag"
+                else "noisy readings: average more samples per pose")
+        w.append(f"the residual RMS is {rms_pct:.2g} % of the radius, which suggests {what}")
+    if rej and len(rej) > 0.1 * n:
+        w.append(
+            f"{len(rej)} of {n} readings ({100 * len(rej) / n:.0f} %) were rejected as "
+            "outliers: the data are noisy or mixed; look at the norms-over-time plot and "
+            "recapture the bad part"
+        )
+    d = np.abs(np.diag(part.matrix))
+    if d.min() > 0 and d.max() / d.min() > 1.25:
+        w.append(
+            f"the axis gains differ by {100 * (d.max() / d.min() - 1):.0f} %: check that all "
+            "three columns come from the same sensor and range setting"
+        )
+    if fit is not None:
+        if not fit.converged:
+            w.append("the fit did not converge: try more readings or model='axis'")
+        if math.isfinite(fit.condition) and fit.condition > 1e6:
+            w.append(
+                f"the fit is poorly determined (condition {fit.condition:.2g}): cover more of "
+                "the sphere or use a simpler model"
+            )
+    for msg in part.stats.get("warnings") or []:
+        if holes and "sphere is empty" in str(msg):
+            continue  # said above, with the direction in words
+        if msg not in w:
+            w.append(str(msg))
+    return w
+
+
+# --------------------------------------------------------------------------------------------
+# Figure
+
+
+def _ellipse(part: SensorCalibration, radius: float, i: int, j: int) -> np.ndarray:
+    """Outline (2, K) of the fitted ellipsoid's projection onto raw axes (i, j)."""
+    a = part.matrix.T @ part.matrix / radius**2
+    k = 3 - i - j
+    idx = [i, j]
+    a2 = a[np.ix_(idx, idx)] - np.outer(a[idx, k], a[k, idx]) / a[k, k]
+    w, v = np.linalg.eigh(a2)
+    t = np.linspace(0, 2 * np.pi, 200)
+    circ = np.vstack([np.cos(t), np.sin(t)])
+    return v @ (circ / np.sqrt(w)[:, None]) + part.offset[idx][:, None]
+
+
+def plot_report(
+    points: Any,
+    cal: Any,
+    path: str | Path,
+    *,
+    report: QualityReport | None = None,
+    sensor: str | None = None,
+    title: str | None = None,
+    dpi: int = 80,
+) -> Path:
+    """Save the report figure (PNG) to ``path``.
+
+    Panels: raw readings in the XY, XZ and YZ projections with the outline of the fitted
+    ellipsoid; calibrated readings with the circle of the radius; a histogram of residuals;
+    the coverage map (equal-area cylindrical projection of the directions, grey cells empty);
+    the calibrated norms over the reading index with the rejected ones marked.
+
+    Raises
+    ------
+    CalibrationError
+        If matplotlib (the ``plot`` extra) is not installed.
+    """
+    if not have_matplotlib():
+        raise CalibrationError(
+            "the report figure needs matplotlib: pip install 'triaxcal[plot]' (or matplotlib)"
+        )
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    pts = as_points(points)
+    part, _ = _resolve(cal)
+    rep = report if report is not None else quality_report(pts, cal, sensor=sensor)
+    keep = np.ones(len(pts), dtype=bool)
+    keep[rep.rejected] = False
+    t = part.temperature.temp_ref_c if part.temperature is not None else None
+    c = part.apply(pts, temperature=t)
+    norms = np.linalg.norm(c, axis=1)
+    r = rep.radius
+    u, ru = part.unit, part.raw_unit
+
+    fig = Figure(figsize=(13, 12.5), dpi=dpi, layout="constrained")
+    gs = fig.add_gridspec(3, 3)
+    name = rep.sensor or sensor or "sensor"
+    fig.suptitle(
+        title or (f"{name}: model {rep.model}, residual RMS {rep.rms:.3g} {u} "
+                  f"({rep.rms_pct:.2g} % of radius {r:.4g} {u}), coverage "
+                  f"{rep.coverage_pct:.0f} %, {len(rep.rejected)} outliers of {rep.n}"),
+        fontsize=13,
+    )
+    kw_in = {"s": 9, "c": "#1f77b4", "alpha": 0.55, "linewidths": 0, "label": "used"}
+    kw_out = {"s": 30, "c": "#d62728", "marker": "x", "linewidths": 1.2, "label": "rejected"}
+    for col, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
+        ax = fig.add_subplot(gs[0, col])
+        ax.scatter(pts[keep, i], pts[keep, j], **kw_in)
+        if (~keep).any():
+            ax.scatter(pts[~keep, i], pts[~keep, j], **kw_out)
+        e = _ellipse(part, r, i, j)
+        ax.plot(e[0], e[1], color="#ff7f0e", lw=1.8, label="fitted ellipsoid (outline)")
+        ax.plot(*part.offset[[i, j]], marker="+", color="#ff7f0e", ms=12, mew=2, ls="none",
+                label="offset")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(f"raw {'XYZ'[i]} ({ru})")
+        ax.set_ylabel(f"raw {'XYZ'[j]} ({ru})")
+        ax.set_title(f"raw {'XYZ'[i]}{'XYZ'[j]}")
+        ax.grid(alpha=0.3)
+
+        ax = fig.add_subplot(gs[1, col])
+        ax.scatter(c[keep, i], c[keep, j], **kw_in)
+        if (~keep).any():
+            ax.scatter(c[~keep, i], c[~keep, j], **kw_out)
+        tt = np.linspace(0, 2 * np.pi, 200)
+        ax.plot(r * np.cos(tt), r * np.sin(tt), color="#2ca02c", lw=1.8,
+                label=f"radius {r:.4g} {u}")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(f"calibrated {'XYZ'[i]} ({u})")
+        ax.set_ylabel(f"calibrated {'XYZ'[j]} ({u})")
+        ax.set_title(f"calibrated {'XYZ'[i]}{'XYZ'[j]}")
+        ax.grid(alpha=0.3)
+        if col == 0:
+            handles = fig.axes[0].get_legend_handles_labels()
+            h2 = ax.get_legend_handles_labels()
+            fig.legend(handles[0] + h2[0][-1:], handles[1] + h2[1][-1:],
+                       loc="outside lower center", ncol=5, fontsize=10, frameon=False)
+
+    # residual histogram
+    ax = fig.add_subplot(gs[2, 0])
+    res_in = norms[keep] - r
+    bins = np.histogram_bin_edges(norms - r, bins=40)
+    ax.hist(res_in, bins=bins, color="#1f77b4", alpha=0.8, label="used")
+    if (~keep).any():
+        ax.hist(norms[~keep] - r, bins=bins, color="#d62728", alpha=0.8, label="rejected")
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_xlabel(f"residual |calibrated| - radius ({u})")
+    ax.set_ylabel("readings")
+    ax.set_title(f"residuals: RMS {rep.rms:.3g} {u}, std/mean of |v| "
+                 f"{100 * rep.uniformity:.2g} %")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+
+    # coverage map: Lambert cylindrical equal-area (x = longitude, y = z), cells are rectangles
+    ax = fig.add_subplot(gs[2, 1])
+    cu = _unit(c[keep])
+    counts, _ = coverage(cu)
+    lon_edges = np.linspace(-180, 180, N_SECTORS + 1)
+    z_edges = np.linspace(-1, 1, N_BANDS + 1)
+    shown = np.where(counts > 0, np.log1p(counts), np.nan)
+    import matplotlib.colors as mcolors
+
+    cmap = matplotlib.colormaps["viridis"].copy()
+    cmap.set_bad("#d9d9d9")
+    ax.pcolormesh(lon_edges, z_edges, np.ma.masked_invalid(shown), cmap=cmap,
+                  norm=mcolors.Normalize(vmin=0, vmax=max(np.nanmax(shown), 1.0)),
+                  edgecolors="white", linewidth=0.6)
+    ax.scatter(np.degrees(np.arctan2(cu[:, 1], cu[:, 0])), cu[:, 2], s=4, c="k", alpha=0.5)
+    for cen, ang, words in rep.empty:
+        lon = float(np.degrees(np.arctan2(cen[1], cen[0])))
+        ax.plot(lon, cen[2], marker="*", ms=18, color="#d62728", mec="k", ls="none",
+                clip_on=False)
+        ax.annotate(f"empty: {words}", (lon, cen[2]), textcoords="offset points",
+                    xytext=(-8 if lon > 60 else 8, 8), ha="right" if lon > 60 else "left",
+                    fontsize=9, color="#d62728",
+                    bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#d62728", "alpha": 0.9})
+    ax.set_xlim(-180, 180)
+    ax.set_ylim(-1, 1)
+    ax.set_xticks([-180, -90, 0, 90, 180])
+    ax.set_xticklabels(["-X", "-Y", "+X", "+Y", "-X"])
+    ax.set_yticks([-1, 0, 1])
+    ax.set_yticklabels(["-Z", "0", "+Z"])
+    ax.set_xlabel("longitude (direction in the XY plane)")
+    ax.set_ylabel("z component (equal-area)")
+    ax.set_title(f"coverage {rep.coverage_pct:.0f} % ({rep.cells_hit}/{rep.cells_total} "
+                 "cells; grey = empty)")
+
+    # norms over time
+    ax = fig.add_subplot(gs[2, 2])
+    idx = np.arange(len(pts))
+    ax.plot(idx, norms, color="#7f7f7f", lw=0.6)
+    ax.scatter(idx[keep], norms[keep], s=6, c="#1f77b4")
+    if (~keep).any():
+        ax.scatter(idx[~keep], norms[~keep], s=30, c="#d62728", marker="x", linewidths=1.2)
+    ax.axhline(r, color="#2ca02c", lw=1.2)
+    ax.set_xlabel("reading index")
+    ax.set_ylabel(f"|calibrated| ({u})")
+    ax.set_title("|calibrated| per reading (x: rejected)")
+    ax.grid(alpha=0.3)
+
+    out = Path(path)
+    fig.savefig(out, format="png", dpi=dpi)
+    return out
