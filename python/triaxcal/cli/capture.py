@@ -1,0 +1,138 @@
+"""``triaxcal capture``: record a session CSV from a board on a serial port."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..capture import capture, channel_names
+from ..io.protocol import PROTOCOLS
+from ..io.serial import SerialReader, parse_request_byte
+
+HELP = "record a session CSV from a sensor board on a serial port"
+
+EPILOG = """\
+Turn the board slowly through many orientations and hold each one still for a second: every
+still pose rings the bell, and the status line says which way to turn next. Ctrl-C stops
+with everything saved. The session CSV has a header 't,<channels>' and one row per record:
+host time in seconds, then the values as received (counts).
+
+examples:
+  triaxcal capture --port /dev/ttyUSB0 --protocol framed --poses 30 --out s.csv
+  triaxcal capture --port /dev/ttyACM0 --protocol binary --channels 7 --out s.csv
+  triaxcal capture --port COM3 --protocol raw --samples 5000 --out s.csv
+"""
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {v}")
+    return v
+
+
+def _request_byte(text: str) -> bytes:
+    try:
+        return parse_request_byte(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "capture",
+        help=HELP,
+        description=HELP[0].upper() + HELP[1:] + ".",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--port", required=True, help="serial port: /dev/ttyUSB0, /dev/ttyACM0, COM3")
+    p.add_argument("--baud", type=_positive_int, default=115200, help="baud rate (default 115200)")
+    p.add_argument("--protocol", required=True, choices=PROTOCOLS,
+                   help="wire protocol: binary (legacy, polled unless --stream), framed "
+                        "(COBS + CRC-16, recommended), text (numbers per line), raw "
+                        "(MotionCal Raw: lines)")
+    p.add_argument("--channels", type=_positive_int, default=None, metavar="K",
+                   help="values per record (default 10: ax ay az gx gy gz mx my mz temp; "
+                        "7 for the AVR firmware; raw is always 9)")
+    p.add_argument("--request-byte", type=_request_byte, default=b"!", metavar="BYTE",
+                   help="request byte of polled binary (default 0x21, '!')")
+    p.add_argument("--stream", action="store_true",
+                   help="binary: the board streams by itself (mode byte B) instead of being "
+                        "polled")
+    stop = p.add_mutually_exclusive_group()
+    stop.add_argument("--samples", type=_positive_int, metavar="N",
+                      help="stop after N records")
+    stop.add_argument("--poses", type=_positive_int, metavar="N",
+                      help="stop after N still poses")
+    p.add_argument("--seconds", type=float, default=None, metavar="S",
+                   help="stop after S seconds")
+    p.add_argument("--out", required=True, metavar="SESSION.csv", help="session CSV to write")
+    exist = p.add_mutually_exclusive_group()
+    exist.add_argument("--append", action="store_true",
+                       help="add to an existing session CSV with the same columns")
+    exist.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    p.add_argument("--no-mode-byte", action="store_true",
+                   help="do not send the mode byte (P/B/F/T/R) that switches the firmware to "
+                        "the protocol; for boards that stream by themselves")
+    p.add_argument("--window", type=_positive_int, default=25, metavar="N",
+                   help="pose detection: samples per averaging window (default 25)")
+    p.add_argument("--hold", type=_positive_int, default=4, metavar="W",
+                   help="pose detection: steady windows before a pose registers (default 4)")
+    p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
+    p.add_argument("--quiet", action="store_true", help="no status line")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    channels = args.channels
+    if channels is None and args.protocol != "raw":
+        channels = 10
+    reader = SerialReader(
+        args.port,
+        protocol=args.protocol,
+        channels=channels,
+        baud=args.baud,
+        stream=args.stream,
+        request_byte=args.request_byte,
+        switch_mode=not args.no_mode_byte,
+    )
+    names = channel_names(args.protocol, channels)
+    mode = "append" if args.append else "overwrite" if args.overwrite else "new"
+    out = sys.stderr
+    if not args.quiet:
+        how = "polled" if reader.polled else "streaming"
+        print(
+            f"triaxcal capture: {args.port} at {args.baud} baud, {args.protocol} ({how}), "
+            f"{len(names)} channels ({' '.join(names)}) -> {args.out}; Ctrl-C stops",
+            file=out,
+        )
+    result = capture(
+        reader,
+        args.out,
+        samples=args.samples,
+        poses=args.poses,
+        duration_s=args.seconds,
+        mode=mode,
+        columns=names,
+        window=args.window,
+        hold_windows=args.hold,
+        progress=None if args.quiet else out,
+        bell=not args.no_bell,
+    )
+    st = result.stats
+    d = st.decoder
+    why = {"interrupt": "stopped by Ctrl-C", "samples": "sample count reached",
+           "poses": "pose count reached", "duration": "time is up", "stop": "stopped"}
+    print(
+        f"triaxcal capture: {why[result.stopped_by]}: {result.samples} rows, "
+        f"{len(result.poses)} poses, sphere {100 * result.coverage:.0f}% covered, saved to "
+        f"{result.path} ({result.elapsed_s:.1f} s; dropped frames {d.dropped_frames}, "
+        f"skipped lines {d.lines_skipped}, lost by sequence {d.lost_frames}, "
+        f"reconnects {st.reconnects})",
+        file=out,
+    )
+    return 0
