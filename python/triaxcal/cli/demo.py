@@ -1,0 +1,226 @@
+"""``triaxcal demo``: capture from a simulated board, fit, and compare with the truth.
+
+The simulated board (:class:`triaxcal.sim.SimDevice`) runs on a pseudo-terminal, and the
+capture goes through exactly the code a real board uses (:func:`triaxcal.capture.capture`
+over :class:`triaxcal.io.serial.SerialReader`). The session CSV is then read back, still
+poses are detected (:func:`triaxcal.detect_poses`), the accelerometer and magnetometer are
+fitted (:func:`triaxcal.fit_ellipsoid`, model "full") and the gyroscope bias is averaged over
+the still poses.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..capture import capture, read_session
+from ..detect import detect_poses, detect_still
+from ..errors import CalibrationError
+from ..fit import EllipsoidFit, fit_ellipsoid
+from ..io.protocol import PROTOCOLS
+from ..io.serial import SerialReader
+from ..sim import GYRO_COUNTS_PER_DPS, SensorTruth, SimDevice, SimIMU, globe_script
+
+HELP = "capture from a simulated board, calibrate it, and compare with the truth"
+
+#: Sample rate of the simulated board, Hz (simulated time).
+RATE_HZ = 100.0
+
+#: Errors up to this many standard errors count as "within the noise".
+WITHIN_SIGMA = 4.0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "demo",
+        help=HELP,
+        description=HELP[0].upper() + HELP[1:] + ". Writes session.csv and results.json "
+        "into --out.",
+    )
+    p.add_argument("--out", default="triaxcal-demo", metavar="DIR",
+                   help="folder for session.csv and results.json (default ./triaxcal-demo)")
+    p.add_argument("--protocol", default="framed", choices=PROTOCOLS,
+                   help="wire protocol between the simulated board and the host (default framed)")
+    p.add_argument("--speed", type=float, default=40.0,
+                   help="simulated seconds per real second (default 40)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the simulated sensor (default 1)")
+    p.add_argument("--quiet", action="store_true", help="print only the summary")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.speed > 0:
+        raise CalibrationError(f"--speed must be > 0, got {args.speed}")
+    result = run_demo(out, protocol=args.protocol, speed=args.speed, seed=args.seed,
+                      progress=None if args.quiet else sys.stderr)
+    print(result["table"])
+    print(f"session: {result['session']}\nresults: {result['results']}")
+    return 0
+
+
+def run_demo(
+    out: Path,
+    *,
+    protocol: str = "framed",
+    speed: float = 40.0,
+    seed: int = 1,
+    progress: Any = None,
+) -> dict[str, Any]:
+    """Run the demo into folder ``out``; returns the results dict (also in results.json)."""
+    t_start = time.monotonic()
+    imu = SimIMU(seed)
+    script = globe_script(hold_s=1.0, seed=seed)
+    session = out / "session.csv"
+    channels = None if protocol == "raw" else 10
+    with SimDevice(imu, script, rate_hz=RATE_HZ, speed=speed, loop=False, seed=seed) as dev:
+        reader = SerialReader(dev.port, protocol=protocol, channels=channels)
+        if progress is not None:
+            print(f"triaxcal demo: simulated board on {dev.port} ({dev.pty_path}), "
+                  f"{len(script)} poses of the globe scheme, {protocol} protocol, "
+                  f"{speed:g}x real time", file=progress)
+        cap = capture(reader, session, stop=dev.finished, mode="overwrite", bell=False,
+                      progress=progress, handle_sigint=False)
+    t_capture = time.monotonic() - t_start
+
+    columns, data = read_session(session)
+    values = data[:, 1:]
+    raw = protocol == "raw"
+    a_cols, g_cols, m_cols = [0, 1, 2], [3, 4, 5], [6, 7, 8]
+    det = detect_poses(values, window=25, units_per_g=8192.0 if raw else 16384.0,
+                       min_separation=0.0)
+    # Twisting about the vertical does not move the accelerometer, so keep only the parts
+    # of each pose where the gyroscope is still too (variance detector, noise floor learnt
+    # from the initial rest), and trim a window off each end of the accelerometer's runs against motion blur.
+    gyro_still = detect_still(values[:, g_cols], rate_hz=RATE_HZ, window_s=0.25, rest_s=1.0,
+                              k=5.0, min_duration_s=0.5)
+    trim = det.window
+    idx = []
+    for p in det.poses:
+        for a, b in gyro_still.intervals:
+            lo, hi = max(p.start + trim, a), min(p.end - trim, b)
+            if hi - lo >= trim:
+                idx.append(np.arange(lo, hi))
+    if len(idx) < 10:
+        raise CalibrationError(
+            f"the demo found only {len(idx)} still poses in {len(values)} samples; "
+            "try a lower --speed (the host may be too slow to keep up)"
+        )
+    means = np.array([values[i].mean(axis=0) for i in idx])
+    still = np.concatenate(idx)
+
+    truth = imu.truth
+    # Raw: lines have MotionCal's fixed scales, not the device's: compare in physical units
+    tr_accel, tr_gyro, tr_mag = truth.accel, truth.gyro, truth.mag
+    accel_fit = fit_ellipsoid(means[:, a_cols], model="full", radius=1.0)
+    mag_fit = fit_ellipsoid(means[:, m_cols], model="full", radius=truth.field_ut)
+    gyro_bias = values[still][:, g_cols].mean(axis=0)
+    gyro_se = values[still][:, g_cols].std(axis=0) / math.sqrt(len(still) / det.window)
+
+    report = {
+        "accel": _compare(accel_fit, tr_accel, "g"),
+        "mag": _compare(mag_fit, tr_mag, "uT"),
+        "gyro": {
+            "offset_true": tr_gyro.offset.tolist(),
+            "offset": gyro_bias.tolist(),
+            "offset_stderr": gyro_se.tolist(),
+            "offset_error": (gyro_bias - tr_gyro.offset).tolist(),
+            "units": "counts (131 counts = 1 deg/s)",
+        },
+    }
+    ok = report["accel"]["within_noise"] and report["mag"]["within_noise"]
+    table = _table(report, accel_fit, mag_fit, len(means), cap.samples, truth.field_ut)
+    results = {
+        "ok": bool(ok),
+        "protocol": protocol,
+        "speed": speed,
+        "seed": seed,
+        "capture": {
+            "rows": cap.samples,
+            "poses_online": len(cap.poses),
+            "coverage": cap.coverage,
+            "stopped_by": cap.stopped_by,
+            "frames_sent": len(dev.sent),
+            "dropped_frames": cap.stats.decoder.dropped_frames,
+            "lost_frames": cap.stats.decoder.lost_frames,
+            "seconds": round(t_capture, 3),
+        },
+        "poses": len(means),
+        "columns": list(columns),
+        "truth": truth.to_dict(),
+        "recovered": report,
+        "seconds": round(time.monotonic() - t_start, 3),
+        "session": str(session),
+    }
+    path = out / "results.json"
+    path.write_text(json.dumps(results, indent=2) + "\n")
+    results["results"] = str(path)
+    results["table"] = table
+    return results
+
+
+_PARAM_CELL = {"diag_x": (0, 0), "diag_y": (1, 1), "diag_z": (2, 2),
+               "offdiag_xy": (0, 1), "offdiag_xz": (0, 2), "offdiag_yz": (1, 2)}
+
+
+def _compare(fit: EllipsoidFit, truth: SensorTruth, units: str) -> dict[str, Any]:
+    """Recovered vs true parameters; matrix terms as ``scale`` (matrix * counts_per_unit)."""
+    cpu = truth.counts_per_unit
+    rows = []
+    se = fit.stderr_dict
+    for i, axis in enumerate("xyz"):
+        rows.append({"name": f"offset_{axis}", "true": float(truth.offset[i]),
+                     "recovered": float(fit.offset[i]), "stderr": se[f"offset_{axis}"],
+                     "units": "counts"})
+    for name, (i, j) in _PARAM_CELL.items():
+        rows.append({"name": name.replace("diag", "scale").replace("offscale", "cross"),
+                     "true": float(truth.matrix[i, j] * cpu),
+                     "recovered": float(fit.matrix[i, j] * cpu),
+                     "stderr": se[name] * cpu, "units": f"x 1/{cpu:g} {units}/count"})
+    for r in rows:
+        r["error"] = r["recovered"] - r["true"]
+        r["sigmas"] = abs(r["error"]) / r["stderr"] if r["stderr"] > 0 else math.inf
+    return {
+        "params": rows,
+        "rms": fit.rms,
+        "units": units,
+        "converged": fit.converged,
+        "within_noise": all(r["sigmas"] <= WITHIN_SIGMA for r in rows),
+        "offset": fit.offset.tolist(),
+        "matrix": fit.matrix.tolist(),
+    }
+
+
+def _table(rep: dict, accel: EllipsoidFit, mag: EllipsoidFit, poses: int, rows: int,
+           field_ut: float) -> str:
+    lines = [f"triaxcal demo: {rows} samples captured, {poses} still poses fitted", ""]
+    head = f"  {'parameter':<10} {'true':>12} {'recovered':>12} {'error':>10} {'std.err':>9}  unit"
+    titles = (
+        ("accel", f"accelerometer (model full, radius 1 g, rms {accel.rms:.2g} g)"),
+        ("mag", f"magnetometer (model full, radius {field_ut:g} uT, rms {mag.rms:.2g} uT)"),
+    )
+    for key, title in titles:
+        lines += [title, head]
+        for r in rep[key]["params"]:
+            digits = 1 if r["units"] == "counts" else 5
+            lines.append(
+                f"  {r['name']:<10} {r['true']:>12.{digits}f} {r['recovered']:>12.{digits}f} "
+                f"{r['error']:>10.{digits}f} {r['stderr']:>9.{digits}f}  {r['units']}"
+            )
+        verdict = "yes" if rep[key]["within_noise"] else "NO"
+        lines += [f"  all within {WITHIN_SIGMA:g} standard errors: {verdict}", ""]
+    g = rep["gyro"]
+    lines += ["gyroscope bias from the still poses (counts; 131 counts = 1 deg/s)", head]
+    for i, axis in enumerate("xyz"):
+        t, v, s = g["offset_true"][i], g["offset"][i], g["offset_stderr"][i]
+        lines.append(f"  {'offset_' + axis:<10} {t:>12.1f} {v:>12.1f} {v - t:>10.1f} {s:>9.1f}"
+                     f"  counts ({(v - t) / GYRO_COUNTS_PER_DPS:+.3f} deg/s)")
+    return "\n".join(lines)
