@@ -837,11 +837,13 @@ def motioncal_packet(
     if cal.mag is not None:
         k, u = _driver_scale(cal.mag, "mag", counts_per_unit)
         ku = k * unit_factor(u, "uT")  # uT per raw unit, as the driver sees it
+        # calibrated units -> uT (a part left in raw counts is scaled like the driver)
+        cu = ku if cal.mag.unit == cal.mag.raw_unit else unit_factor(cal.mag.unit, "uT")
         kw["mag_offset"] = cal.mag.offset * ku
-        kw["soft_iron"] = cal.mag.matrix * unit_factor(cal.mag.unit, "uT") / ku
+        kw["soft_iron"] = cal.mag.matrix * cu / ku
         r = cal.mag.radius if cal.mag.radius is not None else cal.mag.stats.get("radius")
         if r is not None:
-            kw["field"] = float(r) * unit_factor(cal.mag.unit, "uT")
+            kw["field"] = float(r) * cu
     return encode_motioncal(**kw)
 
 

@@ -545,8 +545,7 @@ def plot_report(
     shown = np.where(counts > 0, np.log1p(counts), np.nan)
     import matplotlib.colors as mcolors
 
-    cmap = matplotlib.colormaps["viridis"].copy()
-    cmap.set_bad("#d9d9d9")
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="#d9d9d9")
     ax.pcolormesh(lon_edges, z_edges, np.ma.masked_invalid(shown), cmap=cmap,
                   norm=mcolors.Normalize(vmin=0, vmax=max(np.nanmax(shown), 1.0)),
                   edgecolors="white", linewidth=0.6)

@@ -1,0 +1,142 @@
+"""``triaxcal report SESSION.csv|CAL.json [--plot FIG.png]``: how good is a calibration?
+
+With a session / data file: fit it as ``triaxcal fit`` would (same options) and report. With a
+calibration file: report each part on its input data -- the file named in the calibration
+(as recorded, or next to CAL.json, and checked against the stored SHA-256) or
+the one given with ``--data``; without data, the statistics stored at fit time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..calibration import Calibration, SensorCalibration
+from ..errors import CalibrationError
+from ..report import QualityReport, plot_report, quality_report
+from .fit import add_fit_options, fit_file, pick_columns, read_table
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "report",
+        help="quality report of a calibration: numbers, warnings and a figure",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("data", metavar="SESSION.csv|CAL.json")
+    p.add_argument("--plot", metavar="FIG.png", default=None,
+                   help="save the figure (needs matplotlib: pip install 'triaxcal[plot]'); with "
+                        "several sensors, the sensor name is added before .png")
+    p.add_argument("--data", dest="data_file", default=None, metavar="FILE",
+                   help="with CAL.json: the readings to judge it on")
+    p.add_argument("--json", dest="json_out", default=None, metavar="REPORT.json",
+                   help="also write the numbers as JSON")
+    add_fit_options(p)
+    p.set_defaults(func=run)
+
+
+def _is_calibration(path: Path) -> bool:
+    if path.suffix.lower() == ".json":
+        return True
+    try:
+        head = path.read_bytes()[:200].lstrip()
+    except OSError:
+        return False
+    return head.startswith(b"{")
+
+
+def _find_source(cal_path: Path, part: SensorCalibration) -> Path | None:
+    if not part.source:
+        return None
+    src = Path(part.source)
+    for cand in (src, cal_path.parent / src, cal_path.parent / src.name):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def _stored_text(sensor: str, part: SensorCalibration) -> str:
+    s = part.stats
+    lines = [(f"{sensor} calibration ({part.raw_unit} -> {part.unit}, model {part.model}): "
+             "statistics stored at fit time (pass --data FILE for the full report and figure)")]
+    if "rms" in s:
+        lines.append(f"  residual RMS    {s['rms']:.4g} {part.unit} "
+                     f"({s.get('rms_pct_of_radius', float('nan')):.3g} % of radius)")
+    if "norms" in s:
+        n = s["norms"]
+        lines.append(f"  calibrated |v|  min {n['min']:.6g}  max {n['max']:.6g}  mean "
+                     f"{n['mean']:.6g}  std {n['std']:.4g} {part.unit}")
+    if s.get("coverage_pct") is not None:
+        lines.append(f"  coverage        {s['coverage_pct']:.0f} % of the sphere")
+    if s.get("rejected") is not None:
+        lines.append(f"  outliers        {len(s['rejected'])} rejected")
+    for w in s.get("warnings", []):
+        lines.append(f"    - {w}")
+    return "\n".join(lines)
+
+
+def _plot_path(base: str, sensor: str, many: bool) -> Path:
+    p = Path(base)
+    return p.with_name(f"{p.stem}_{sensor}{p.suffix or '.png'}") if many else p
+
+
+def run(args: argparse.Namespace) -> int:
+    path = Path(args.data)
+    if not path.exists():
+        raise CalibrationError(f"{path} not found")
+    reports: dict[str, QualityReport] = {}
+    if _is_calibration(path):
+        cal = Calibration.load(path)
+        sensors = [args.sensor] if args.sensor else list(cal.sensors)
+        for sensor in sensors:
+            part = cal.part(sensor)
+            src = Path(args.data_file) if args.data_file else _find_source(path, part)
+            if src is None:
+                print(_stored_text(sensor, part))
+                if args.plot:
+                    print(f"  (no figure for {sensor}: its data file {part.source!r} was not "
+                          "found; pass --data FILE)", file=sys.stderr)
+                continue
+            table = read_table(src)
+            if args.data_file is None and part.input_sha256 not in (None, table.sha256):
+                raise CalibrationError(
+                    f"{src} has changed since the calibration was made (SHA-256 differs): pass "
+                    "--data FILE explicitly to judge the calibration on it anyway"
+                )
+            cols_spec = args.columns or ",".join(str(c) for c in part.stats.get("columns", []))
+            cols = pick_columns(table, cols_spec or None, sensor)
+            pts = table.data[:, cols]
+            if part.stats.get("poses"):
+                from .fit import _pose_points
+                pts = _pose_points(table, cols, args)
+            rej = part.stats.get("rejected") if table.sha256 == part.input_sha256 else None
+            if rej is not None and (not rej or max(rej) < len(pts)):
+                rep = quality_report(pts, part, sensor=sensor, rejected=rej)
+            else:
+                rep = quality_report(pts, part, sensor=sensor, rejected=[])
+            reports[sensor] = rep
+            print(rep.text())
+            if args.plot:
+                out = plot_report(pts, part, _plot_path(args.plot, sensor, len(sensors) > 1),
+                                  report=rep)
+                print(f"  figure: {out}")
+    else:
+        res = fit_file(args)
+        rep = quality_report(res.points, res.part, sensor=res.sensor,
+                             rejected=res.rejected.tolist(), model_reason=res.reason)
+        reports[res.sensor] = rep
+        print(rep.text())
+        if args.plot:
+            out = plot_report(res.points, res.part, args.plot, report=rep)
+            print(f"  figure: {out}")
+    if args.json_out:
+        Path(args.json_out).write_text(
+            json.dumps({k: r.to_dict() for k, r in reports.items()}, indent=2) + "\n",
+            encoding="utf-8",
+        )
+        print(f"  numbers: {args.json_out}")
+    return 0

@@ -1,0 +1,96 @@
+"""``triaxcal send CAL.json --port PORT``: write the MotionCal calibration packet to a board.
+
+The board (Adafruit_Sensor_Calibration sketches, the project firmware, ``triaxcal.sim``)
+answers a packet with a valid CRC with ``Cal1:`` and ``Cal2:`` lines; ``send`` reads them back
+and checks every value against what it sent (4 decimals). Without an answer within
+``--timeout`` seconds, or with different values, it fails with a message saying what to check.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from ..calibration import Calibration
+from ..errors import CalibrationError
+from ..export import echo_matches, motioncal_packet, parse_motioncal_echo
+from .export import _scale
+
+
+def send_packet(port: str, packet: bytes, *, baud: int = 115200,
+                timeout: float = 3.0) -> tuple[list[float], list[float]]:
+    """Write ``packet`` to the serial ``port`` and return the board's ``(Cal1, Cal2)`` echo.
+
+    Raises :class:`CalibrationError` when the port cannot be opened, no echo arrives within
+    ``timeout`` seconds, or the echoed values differ from the packet's.
+    """
+    import serial
+
+    try:
+        ser = serial.serial_for_url(port, baudrate=baud, timeout=0.05, write_timeout=timeout)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise CalibrationError(
+            f"cannot open {port}: {exc}; check the port name (ls /dev/tty*) and that no other "
+            "program (serial monitor, MotionCal) holds it"
+        ) from None
+    with ser:
+        ser.reset_input_buffer()
+        ser.write(packet)
+        ser.flush()
+        buf = bytearray()
+        deadline = time.monotonic() + timeout
+        echo = None
+        while time.monotonic() < deadline:
+            chunk = ser.read(4096)
+            if chunk:
+                buf += chunk
+                echo = parse_motioncal_echo(bytes(buf))
+                if echo is not None:
+                    break
+                if len(buf) > 1 << 20:
+                    del buf[: len(buf) - 4096]
+    if echo is None:
+        seen = bytes(buf[-80:])
+        raise CalibrationError(
+            f"no Cal1:/Cal2: echo from {port} within {timeout:g} s (received {len(buf)} bytes"
+            + (f", last: {seen!r}" if buf else "")
+            + "): check the baud rate (--baud), that the board runs a sketch that accepts "
+            "MotionCal packets, and that it has finished booting (try again, or --timeout 10)"
+        )
+    bad = echo_matches(packet, *echo)
+    if bad:
+        raise CalibrationError(
+            "the board echoed different values: " + "; ".join(bad[:5])
+            + " -- the packet may have been garbled; send it again"
+        )
+    return echo
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "send",
+        help="write the MotionCal calibration packet to a board and check its echo",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("calibration", metavar="CAL.json")
+    p.add_argument("--port", required=True,
+                   help="serial port (/dev/ttyUSB0, COM3) or a pyserial URL (loop://)")
+    p.add_argument("--baud", type=int, default=115200)
+    p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the echo")
+    p.add_argument("--counts-per-unit", type=_scale, action="append", default=[],
+                   metavar="SENSOR=COUNTS[:UNIT]",
+                   help="the board driver's scale (default accel=16384:g, gyro=131:deg/s, "
+                        "mag=10:uT)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    cal = Calibration.load(args.calibration)
+    packet = motioncal_packet(cal, counts_per_unit=dict(args.counts_per_unit) or None)
+    cal1, cal2 = send_packet(args.port, packet, baud=args.baud, timeout=args.timeout)
+    print(f"sent {len(packet)}-byte MotionCal packet to {args.port}; the board confirmed it")
+    print("  Cal1: " + ", ".join(f"{v:.4f}" for v in cal1))
+    print("  Cal2: " + ", ".join(f"{v:.4f}" for v in cal2))
+    return 0
