@@ -42,8 +42,32 @@ from .gyro import (
     gyro_bias,
     gyro_gains,
 )
+from .imu import (
+    ImuCalibration,
+    SweepStep,
+    TriadCalibration,
+    calibrate_imu,
+)
+from .methods import (
+    FerrarisCalibration,
+    SixPosition,
+    TiltRig,
+    ferraris,
+    six_position,
+    tilt_rig,
+)
 
 __all__ = [
+    "tilt_rig",
+    "six_position",
+    "ferraris",
+    "TiltRig",
+    "SixPosition",
+    "FerrarisCalibration",
+    "calibrate_imu",
+    "TriadCalibration",
+    "SweepStep",
+    "ImuCalibration",
     "gyro_gains",
     "gyro_bias",
     "fit_turntable",

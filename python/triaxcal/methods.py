@@ -1,0 +1,373 @@
+"""Calibration methods that need no fit: tilt rig, six-position min/max, Ferraris closed form.
+
+Error model (per axis unless stated): ``calibrated = (raw - offset) * gain`` where ``gain``
+**multiplies** and is in calibrated units per raw unit (g per count, or g per g for a sensor
+already in g). :class:`SixPosition` also reports the inverse (raw units per g), the quantity the
+min/max method measures directly. The Ferraris method (Ferraris et al. 1995, as in imucal)
+gives full 3x3 matrices: ``calibrated = (raw - offset) @ matrix.T``.
+
+Tilt rig (tilt-rig-gravity-calibration.txt), with the algebra checked: a reading ``s`` taken
+with an axis tilted down by ``theta`` and ``s'`` tilted up by ``theta`` see ``+-sin(theta)`` g,
+so ``gain * (s - offset) = sin(theta)`` and ``gain * (s' - offset) = -sin(theta)``, giving
+
+    offset = (s + s') / 2,        gain = 2 sin(theta) / |s - s'|.
+
+The seed writes ``g = sin(theta) / (s + o)``, i.e. it adds the offset it should subtract; its
+published x and y gains (1.2856, 1.3334) are therefore ~12-15 % too high. The vertical axis sees
+``cos(theta)`` in every tilt, so its offset cannot be told from its gain without an upside-down
+reading: it is taken as 0 (or given) and ``gain_z = cos(theta) / (mean(s_z) - offset_z)``.
+
+The tilt angle the data imply: if the horizontal and vertical axes have the same gain, the
+half-span of the tilted axis over the vertical reading is ``tan(theta)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import CalibrationError
+from .imu import TriadCalibration
+
+__all__ = [
+    "FerrarisCalibration",
+    "SixPosition",
+    "TiltRig",
+    "ferraris",
+    "six_position",
+    "tilt_rig",
+]
+
+AXES = "xyz"
+FERRARIS_SECTIONS = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a", "x_rot", "y_rot", "z_rot")
+TILT_KEYS = ("fore_down", "aft_down", "left_down", "right_down")
+
+
+def _ro(a: Any) -> np.ndarray:
+    arr = np.array(a, dtype=np.float64)
+    arr.setflags(write=False)
+    return arr
+
+
+def _readings(x: Any, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (ValueError, TypeError) as exc:
+        raise CalibrationError(f"{name} must be numbers, shape (3,) or (N, 3) ({exc})") from None
+    if arr.ndim == 1:
+        arr = arr[None]
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] == 0:
+        raise CalibrationError(f"{name} must have shape (3,) or (N, 3), got {np.shape(x)}")
+    if not np.isfinite(arr).all():
+        raise CalibrationError(f"{name} contains NaN or inf; repair or drop those readings")
+    return arr
+
+
+# --- tilt rig -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TiltRig:
+    """The result of :func:`tilt_rig`.
+
+    Attributes
+    ----------
+    offset : ndarray (3,)
+        Raw units; ``offset[2]`` is the assumed (given) z offset, not a measurement.
+    gain : ndarray (3,)
+        g per raw unit, **multiplies**: ``calibrated_g = (raw - offset) * gain``.
+    gain_z_pairs : ndarray (2,)
+        The z gain from the fore/aft pair and from the left/right pair (they should agree).
+    implied_angle_deg : ndarray (2,)
+        Tilt angle implied by the fore/aft and the left/right pair (equal gains assumed).
+    angle_error_deg : ndarray (2,)
+        ``implied - stated``.
+    angle_deg : float
+        The stated tilt angle.
+    """
+
+    offset: np.ndarray
+    gain: np.ndarray
+    gain_z_pairs: np.ndarray
+    implied_angle_deg: np.ndarray
+    angle_error_deg: np.ndarray
+    angle_deg: float
+
+    def apply(self, raw: Any) -> np.ndarray:
+        """Calibrated readings in g: ``(raw - offset) * gain``."""
+        return (np.asarray(raw, dtype=np.float64) - self.offset) * self.gain
+
+
+def tilt_rig(
+    readings: Mapping[str, Any], *, angle_deg: float, z_offset: float = 0.0
+) -> TiltRig:
+    """Offsets and gains from readings on a rig tilted by a known angle (the seed's method).
+
+    Parameters
+    ----------
+    readings : mapping
+        ``fore_down``, ``aft_down`` (x axis tilted down / up by ``angle_deg``), ``left_down``,
+        ``right_down`` (y axis tilted ...): each a reading (3,) or several (N, 3), in g (or
+        counts). Fewer keys: the pair that is complete is used and the error names the rest.
+    angle_deg : float
+        The rig's tilt, degrees (the seed: 10).
+    z_offset : float
+        Offset of the vertical axis, which these tilts cannot measure (raw units).
+
+    Returns
+    -------
+    TiltRig
+    """
+    ang = float(angle_deg)
+    if not (np.isfinite(ang) and 0 < ang < 90):
+        raise CalibrationError(f"angle_deg must be between 0 and 90 degrees, got {angle_deg!r}")
+    missing = [k for k in TILT_KEYS if k not in readings]
+    if missing:
+        raise CalibrationError(
+            f"tilt readings missing: {', '.join(missing)} (need fore_down and aft_down for x, "
+            "left_down and right_down for y)"
+        )
+    m = {k: _readings(readings[k], k).mean(axis=0) for k in TILT_KEYS}
+    th = np.radians(ang)
+    offset = np.zeros(3)
+    gain = np.zeros(3)
+    implied = np.zeros(2)
+    gz = np.zeros(2)
+    for j, (down, up) in enumerate((("fore_down", "aft_down"), ("left_down", "right_down"))):
+        s, s2 = m[down], m[up]
+        span = abs(s[j] - s2[j]) / 2
+        if span <= 0:
+            raise CalibrationError(
+                f"{down} and {up} read the same on {AXES[j]}: the rig was not tilted; tilt it by "
+                f"{ang:g} deg one way and then the other"
+            )
+        offset[j] = (s[j] + s2[j]) / 2
+        gain[j] = np.sin(th) / span
+        zmean = 0.5 * (s[2] + s2[2]) - z_offset
+        if zmean == 0:
+            raise CalibrationError("the vertical axis reads zero: is z pointing up on the rig?")
+        gz[j] = np.cos(th) / zmean
+        # the other horizontal axis may change a little too (the rig is not square to the
+        # sensor): the tilt is the whole horizontal half-span over the vertical reading
+        k = 1 - j
+        horiz = np.hypot(span, abs(s[k] - s2[k]) / 2)
+        implied[j] = np.degrees(np.arctan2(horiz, abs(zmean)))
+    offset[2] = z_offset
+    gain[2] = gz.mean()
+    return TiltRig(
+        offset=_ro(offset),
+        gain=_ro(gain),
+        gain_z_pairs=_ro(gz),
+        implied_angle_deg=_ro(implied),
+        angle_error_deg=_ro(implied - ang),
+        angle_deg=ang,
+    )
+
+
+# --- six-position min/max ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SixPosition:
+    """The result of :func:`six_position`.
+
+    Attributes
+    ----------
+    offset : ndarray (3,)
+        ``(max + min) / 2`` per axis, raw units.
+    counts_per_g : ndarray (3,)
+        ``(max - min) / 2`` per axis: raw units per g (divides).
+    matrix : ndarray (3, 3)
+        ``diag(gravity / counts_per_g)``: multiplies, ``calibrated = (raw - offset) @ matrix.T``
+        in the units of ``gravity``.
+    faces : dict
+        Index of the pose used for each face (``"+x"``, ``"-x"``, ...).
+    """
+
+    offset: np.ndarray
+    counts_per_g: np.ndarray
+    matrix: np.ndarray
+    faces: dict
+
+    def apply(self, raw: Any) -> np.ndarray:
+        """``(raw - offset) @ matrix.T``."""
+        return (np.asarray(raw, dtype=np.float64) - self.offset) @ self.matrix.T
+
+
+def six_position(points: Any, *, gravity: float = 1.0) -> SixPosition:
+    """Offset and gain per axis from the six faces of a cube (min/max method).
+
+    Parameters
+    ----------
+    points : array_like (M, 3), M >= 6
+        Still-pose means (e.g. :attr:`PoseDetection.points`) including each axis pointing up
+        and down. For each axis the largest and smallest reading are used.
+    gravity : float
+        Magnitude calibrated readings should have (1.0 for g, 9.80665 for m/s^2).
+
+    Raises
+    ------
+    CalibrationError
+        If a face is missing: the message names it (e.g. "-y (y axis pointing down)").
+    """
+    p = _readings(points, "points")
+    grav = float(gravity)
+    if not (np.isfinite(grav) and grav > 0):
+        raise CalibrationError(f"gravity must be > 0, got {gravity!r}")
+    if p.shape[0] < 6:
+        raise CalibrationError(f"six_position needs the six faces, got {p.shape[0]} poses")
+    hi, lo = p.max(axis=0), p.min(axis=0)
+    center = 0.5 * (hi + lo)
+    d = p - center
+    dom = np.argmax(np.abs(d), axis=1)
+    faces = {}
+    missing = []
+    for i in range(3):
+        for sign, name in ((1, "+"), (-1, "-")):
+            cand = np.flatnonzero((dom == i) & (np.sign(d[:, i]) == sign))
+            if cand.size == 0:
+                word = "up" if sign > 0 else "down"
+                missing.append(f"{name}{AXES[i]} ({AXES[i]} axis pointing {word})")
+            else:
+                faces[f"{name}{AXES[i]}"] = int(cand[np.argmax(sign * d[cand, i])])
+    if missing:
+        raise CalibrationError(
+            f"faces missing: {', '.join(missing)}; place the sensor on each of its six sides"
+        )
+    top = np.array([p[faces[f"+{a}"], i] for i, a in enumerate(AXES)])
+    bot = np.array([p[faces[f"-{a}"], i] for i, a in enumerate(AXES)])
+    off = (top + bot) / 2
+    cpg = (top - bot) / 2
+    return SixPosition(_ro(off), _ro(cpg), _ro(np.diag(grav / cpg)), faces)
+
+
+# --- Ferraris closed form ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FerrarisCalibration:
+    """The result of :func:`ferraris`.
+
+    Attributes
+    ----------
+    accel : TriadCalibration
+        ``(acc - offset) @ matrix.T`` in the units of ``gravity``.
+    gyro : TriadCalibration
+        ``(gyro - offset - g_sensitivity @ acc_cal) @ matrix.T`` in rad/s.
+    g_sensitivity : ndarray (3, 3)
+        Gyro counts per unit of calibrated acceleration (linear-acceleration sensitivity).
+    accel_counts_per_g : ndarray (3,)
+        Row norms of ``inv(accel.matrix)`` times ``gravity``: raw units per g.
+    gyro_counts_per_dps : ndarray (3,)
+        Row norms of ``inv(gyro.matrix)`` in raw units per deg/s.
+    rotation_sign : ndarray (3,)
+        The sense (+1 ccw, -1 cw) assumed for each 360 deg turn, chosen so that the diagonal
+        of the gyro matrix is positive (the recordings do not say which way they turned).
+    """
+
+    accel: TriadCalibration
+    gyro: TriadCalibration
+    g_sensitivity: np.ndarray
+    accel_counts_per_g: np.ndarray
+    gyro_counts_per_dps: np.ndarray
+    rotation_sign: np.ndarray
+
+    def apply_gyro(self, gyro: Any, acc: Any) -> np.ndarray:
+        """Calibrated rates (rad/s), removing the linear-acceleration sensitivity."""
+        a = self.accel.apply(acc)
+        return (np.asarray(gyro, dtype=np.float64) - self.gyro.offset
+                - a @ self.g_sensitivity.T) @ self.gyro.matrix.T
+
+
+def ferraris(
+    sections: Mapping[str, tuple[Any, Any]],
+    *,
+    rate_hz: float,
+    gravity: float = 9.81,
+    angle_deg: float = 360.0,
+) -> FerrarisCalibration:
+    """Closed-form Ferraris calibration from six static faces and three full turns.
+
+    Parameters
+    ----------
+    sections : mapping of name -> (acc (N, 3), gyro (N, 3))
+        ``x_p, x_a, y_p, y_a, z_p, z_a``: still, that axis pointing up (``_p``, accelerometer
+        reads +1 g) and down (``_a``); ``x_rot, y_rot, z_rot``: a turn of ``angle_deg`` about
+        that axis (uniformly sampled; the whole section is integrated).
+    rate_hz : float
+        Sampling rate, Hz.
+    gravity : float
+        Local gravity in the units wanted for the accelerometer.
+    angle_deg : float
+        Angle of each turn, degrees.
+
+    Returns
+    -------
+    FerrarisCalibration
+    """
+    missing = [k for k in FERRARIS_SECTIONS if k not in sections]
+    if missing:
+        poses = [k for k in missing if not k.endswith("_rot")]
+        rots = [k for k in missing if k.endswith("_rot")]
+        parts = []
+        if poses:
+            parts.append(f"static poses missing: {', '.join(poses)}")
+        if rots:
+            parts.append(f"rotations missing: {', '.join(rots)}")
+        raise CalibrationError(
+            "; ".join(parts) + " (x_p = x axis up, x_a = x axis down, x_rot = a full turn about x)"
+        )
+    rate = float(rate_hz)
+    if not (np.isfinite(rate) and rate > 0):
+        raise CalibrationError(f"rate_hz must be > 0, got {rate_hz!r}")
+    grav = float(gravity)
+    if not (np.isfinite(grav) and grav > 0):
+        raise CalibrationError(f"gravity must be > 0, got {gravity!r}")
+    acc = {k: _readings(sections[k][0], f"{k} acc") for k in FERRARIS_SECTIONS}
+    gyr = {k: _readings(sections[k][1], f"{k} gyro") for k in FERRARIS_SECTIONS}
+    for k in FERRARIS_SECTIONS:
+        if acc[k].shape != gyr[k].shape:
+            raise CalibrationError(f"{k}: acc and gyro have different lengths")
+    static = FERRARIS_SECTIONS[:6]
+    up = np.column_stack([acc[f"{a}_p"].mean(axis=0) for a in AXES])
+    down = np.column_stack([acc[f"{a}_a"].mean(axis=0) for a in AXES])
+    b_a = (up.sum(axis=1) + down.sum(axis=1)) / 6
+    a_mat = (up - down) / (2 * grav)  # raw per unit; column i = response to +1 unit along i
+    if abs(np.linalg.det(a_mat)) < 1e-12 * np.abs(a_mat).max() ** 3:
+        raise CalibrationError("the six static poses do not span three axes: check the labels")
+    m_a = np.linalg.inv(a_mat)
+    accel = TriadCalibration(_ro(b_a), _ro(m_a), "gravity units")
+    b_g = np.vstack([gyr[k] for k in static]).mean(axis=0)
+    g_up = np.column_stack([gyr[f"{a}_p"].mean(axis=0) for a in AXES])
+    g_down = np.column_stack([gyr[f"{a}_a"].mean(axis=0) for a in AXES])
+    k_ga = (g_up - g_down) / (2 * grav)
+    w = np.zeros((3, 3))
+    ang = float(angle_deg)
+    if not (np.isfinite(ang) and ang != 0):
+        raise CalibrationError(f"angle_deg must be a non-zero number, got {angle_deg!r}")
+    for i, a in enumerate(AXES):
+        cal_a = accel.apply(acc[f"{a}_rot"])
+        cor = gyr[f"{a}_rot"] - b_g - cal_a @ k_ga.T
+        w[:, i] = cor.sum(axis=0) / rate  # raw * s
+    sign = np.sign(np.diag(w))
+    sign[sign == 0] = 1
+    g_mat = w / (ang * sign)  # raw per deg/s, column i = response to +1 deg/s about i
+    small = [f"{a}_rot" for i, a in enumerate(AXES)
+             if abs(g_mat[i, i]) < 0.5 * np.median(np.abs(np.diag(g_mat)))]
+    if small:
+        raise CalibrationError(
+            f"rotations too small in {', '.join(small)}: each section must hold a full "
+            f"{ang:g} deg turn about its axis"
+        )
+    m_g = np.linalg.inv(g_mat) * (np.pi / 180)  # rad/s per raw
+    return FerrarisCalibration(
+        accel=accel,
+        gyro=TriadCalibration(_ro(b_g), _ro(m_g), "rad/s"),
+        g_sensitivity=_ro(k_ga),
+        accel_counts_per_g=_ro(np.linalg.norm(a_mat, axis=1) * grav),
+        gyro_counts_per_dps=_ro(np.linalg.norm(g_mat, axis=1)),
+        rotation_sign=_ro(sign),
+    )

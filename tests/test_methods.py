@@ -1,0 +1,149 @@
+"""Tilt rig, six-position min/max and the Ferraris closed form, on the seeds' and real data."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import triaxcal as tc
+from _realdata import load_ferraris_annotated
+from triaxcal.sim import SimIMU, six_face_script
+
+# The seed's published coefficients (tilt-rig-gravity-calibration.txt) and its formula
+# a = g * (s + o), and the 24 norms it printed as its sanity check.
+SEED_OFFSET = np.array([0.007894833, 0.009969, 0.000359667])
+SEED_GAIN = np.array([1.28560825, 1.333382476, 0.936797208])
+
+
+def _seed_samples(realdata: Path) -> dict[str, np.ndarray]:
+    """The twelve real samples of the tilt-rig seed: {FD, AD, LD, RD: (3, 8) rows}."""
+    text = (realdata.parent / "seeds" / "tilt-rig-gravity-calibration.txt").read_text()
+    out: dict[str, list] = {}
+    cur = None
+    for line in text.splitlines():
+        s = line.strip()
+        if s in ("FD", "AD", "LD", "RD"):
+            cur = s
+            out[cur] = []
+        elif cur and re.match(r"^-?\d+, ", s):
+            out[cur].append([float(v) for v in s.split(",")])
+        elif cur:
+            cur = None
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _seed_published_norms(realdata: Path) -> np.ndarray:
+    text = (realdata.parent / "seeds" / "tilt-rig-gravity-calibration.txt").read_text()
+    rows = re.findall(r"^\s*(1\.0\d+)\s+(1\.0\d+)\s*$", text, flags=re.MULTILINE)
+    return np.array(rows, dtype=float).reshape(-1)
+
+
+def test_tilt_rig_on_the_seed_samples(realdata):
+    d = _seed_samples(realdata)
+    assert {k: v.shape for k, v in d.items()} == {k: (3, 8) for k in ("FD", "AD", "LD", "RD")}
+    acc = {k: v[:, 2:5] for k, v in d.items()}  # columns: raw temp, temp, ax ay az (g), gyro
+    rig = tc.tilt_rig({"fore_down": acc["FD"], "aft_down": acc["AD"], "left_down": acc["LD"],
+                       "right_down": acc["RD"]}, angle_deg=10.0)
+    # same offsets as the seed (that part of its algebra is right) ...
+    np.testing.assert_allclose(rig.offset[:2], SEED_OFFSET[:2], rtol=1e-6)
+    # ... but gain = sin(theta) / (s - o), not / (s + o): about 11-13 % lower
+    assert np.all(rig.gain[:2] < 0.9 * SEED_GAIN[:2])
+    assert abs(rig.gain_z_pairs[0] - rig.gain_z_pairs[1]) < 1e-3
+    everything = np.vstack(list(acc.values()))
+    mine = np.abs(np.linalg.norm(rig.apply(everything), axis=1) - 1)
+    seeds = np.abs(np.linalg.norm((everything + SEED_OFFSET) * SEED_GAIN, axis=1) - 1)
+    published = np.abs(_seed_published_norms(realdata) - 1)
+    assert published.size == 24 and published.min() > 0.004
+    assert mine.max() < 1e-3
+    assert mine.max() < seeds.max() and mine.mean() < seeds.mean() / 5
+    assert mine.max() < published.min()
+    # the data imply a tilt of about 8.2 deg, not the stated 10 (under equal gains)
+    np.testing.assert_allclose(rig.implied_angle_deg, 8.15, atol=0.1)
+    np.testing.assert_allclose(rig.angle_error_deg, rig.implied_angle_deg - 10.0)
+
+
+def test_tilt_rig_recovers_a_known_sensor_and_angle():
+    th = math.radians(12.0)
+    off = np.array([0.02, -0.03, 0.0])
+    gain = np.array([1.05, 0.97, 1.02])  # calibrated = (raw - off) * gain
+    def raw(v):
+        return np.asarray(v) / gain + off
+    r = tc.tilt_rig({"fore_down": raw([-math.sin(th), 0, math.cos(th)]),
+                     "aft_down": raw([math.sin(th), 0, math.cos(th)]),
+                     "left_down": raw([0, -math.sin(th), math.cos(th)]),
+                     "right_down": raw([0, math.sin(th), math.cos(th)])}, angle_deg=12.0)
+    np.testing.assert_allclose(r.offset, off, atol=1e-12)
+    np.testing.assert_allclose(r.gain, gain, rtol=1e-12)
+    with pytest.raises(tc.CalibrationError, match="missing: left_down, right_down"):
+        tc.tilt_rig({"fore_down": [0, 0, 1], "aft_down": [0.1, 0, 1]}, angle_deg=10)
+    with pytest.raises(tc.CalibrationError, match="not tilted"):
+        tc.tilt_rig({k: [0, 0, 1.0] for k in ("fore_down", "aft_down", "left_down",
+                                              "right_down")}, angle_deg=10)
+    with pytest.raises(tc.CalibrationError, match="angle_deg"):
+        tc.tilt_rig({}, angle_deg=0)
+
+
+def test_six_position_min_max_on_the_simulator():
+    imu = SimIMU(7, accel={"scale": [1.02, 0.97, 1.01]})
+    rec = imu.record(six_face_script(jitter_deg=0.5), rate_hz=100)
+    det = tc.detect_poses(rec.accel, units_per_g=16384)
+    six = tc.six_position(det.points)
+    assert sorted(six.faces) == ["+x", "+y", "+z", "-x", "-y", "-z"]
+    truth = imu.truth.accel
+    np.testing.assert_allclose(six.offset, truth.offset, atol=0.003 * 16384)
+    true_cpg = 1 / np.diag(truth.matrix)
+    np.testing.assert_allclose(six.counts_per_g, true_cpg, rtol=0.005)
+    np.testing.assert_allclose(np.diag(six.matrix) * six.counts_per_g, 1.0)
+    g = np.linalg.norm(six.apply(det.points), axis=1)
+    np.testing.assert_allclose(g, 1.0, atol=0.01)
+
+
+def test_six_position_names_missing_faces():
+    pts = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, -1], [0.7, 0.7, 0]])
+    with pytest.raises(tc.CalibrationError, match=r"-y \(y axis pointing down\)"):
+        tc.six_position(pts * 16384)
+    with pytest.raises(tc.CalibrationError, match="six faces"):
+        tc.six_position(pts[:3])
+    with pytest.raises(tc.CalibrationError, match="NaN"):
+        tc.six_position(np.full((6, 3), np.nan))
+
+
+def test_ferraris_on_the_imucal_annotated_session(realdata):
+    parts = load_ferraris_annotated(realdata)
+    fer = tc.ferraris(parts, rate_hz=204.8, gravity=9.81)
+    # a +-16 g accelerometer (2048 counts/g) and a +-2000 deg/s gyro (16.4 counts per deg/s)
+    np.testing.assert_allclose(fer.accel_counts_per_g, 2048, rtol=0.04)
+    np.testing.assert_allclose(fer.gyro_counts_per_dps, 16.4, rtol=0.03)
+    # calibrated faces: up minus down is exactly 2 g along the axis, the six average to zero
+    cal = {k: fer.accel.apply(parts[k][0]).mean(axis=0) for k in parts if not k.endswith("rot")}
+    for a, i in zip("xyz", range(3)):
+        np.testing.assert_allclose(cal[a + "_p"] - cal[a + "_a"], 2 * 9.81 * np.eye(3)[i],
+                                   atol=1e-9)
+        assert abs(np.linalg.norm(cal[a + "_p"]) - 9.81) < 0.05
+    np.testing.assert_allclose(np.mean(list(cal.values()), axis=0), 0, atol=1e-9)
+    # each 360 deg turn integrates to 360 deg about its own axis after calibration
+    for a, i in zip("xyz", range(3)):
+        acc, gyr = parts[a + "_rot"]
+        w = np.degrees(fer.apply_gyro(gyr, acc)).sum(axis=0) / 204.8
+        assert abs(abs(w[i]) - 360) < 1e-6 and np.all(np.abs(np.delete(w, i)) < 1e-6)
+    # per-axis gains by integration agree with the closed form
+    gains = []
+    for a, i in zip("xyz", range(3)):
+        gyr = parts[a + "_rot"][1] - fer.gyro.offset
+        gains.append(abs(gyr.sum(axis=0)[i]) / 204.8 / 360)
+    np.testing.assert_allclose(gains, np.abs(np.diag(np.linalg.inv(fer.gyro.matrix)))
+                               * math.pi / 180, rtol=0.03)
+
+
+def test_ferraris_names_missing_sections(realdata):
+    parts = load_ferraris_annotated(realdata)
+    part = {k: v for k, v in parts.items() if k not in ("y_a", "z_rot")}
+    with pytest.raises(tc.CalibrationError, match="static poses missing: y_a; rotations missing: z_rot"):
+        tc.ferraris(part, rate_hz=204.8)
+    small = dict(parts)
+    small["y_rot"] = (parts["y_rot"][0][:40], parts["y_rot"][1][:40])
+    with pytest.raises(tc.CalibrationError, match="rotations too small in y_rot"):
+        tc.ferraris(small, rate_hz=204.8)
