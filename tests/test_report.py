@@ -1,0 +1,136 @@
+"""Quality report, model selection (BIC), robust fitting, and the report figure."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import triaxcal as tc
+from triaxcal.report import (
+    coverage,
+    direction_words,
+    empty_regions,
+    plot_report,
+    quality_report,
+)
+from triaxcal.select import fit_auto, fit_robust
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _sphere(n, seed=0):
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(n, 3))
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+def test_coverage_equal_area_cells():
+    u = _sphere(100_000)
+    counts, pct = coverage(u)
+    assert counts.shape == (10, 10) and pct == 100.0
+    # equal-area cells: uniform directions fill them evenly (within sampling noise)
+    assert counts.min() > 0.85 * counts.mean() and counts.max() < 1.15 * counts.mean()
+    _, half = coverage(u[u[:, 2] < 0])
+    assert half == 50.0
+
+
+def test_empty_regions_named_in_words():
+    u = _sphere(2000)
+    holes = empty_regions(u[u[:, 2] < 0.3])  # the top cap is missing
+    assert holes and holes[0][0][2] > 0.95 and holes[0][1] > 60
+    assert direction_words(holes[0][0]) == "the top (+Z)"
+    assert direction_words([0, 0, -1]) == "the bottom (-Z)"
+    assert direction_words([-1, 0.1, 0]) == "the -X side"
+    assert direction_words([0.7, 0.05, -0.7]) == "between +X and -Z (bottom)"
+    assert empty_regions(u) == []
+
+
+def test_report_numbers_and_warnings():
+    rng = np.random.default_rng(1)
+    u = _sphere(400, seed=2)
+    u = u[u[:, 2] < 0.2]  # the board was never turned right side up
+    raw = u * 16384 / [1.02, 0.98, 1.0] + [300, -150, 80] + rng.normal(scale=30, size=u.shape)
+    fit = tc.fit_ellipsoid(raw, model="axis", radius=1.0)
+    part = tc.SensorCalibration.from_fit(fit, unit="g", points=raw)
+    rep = quality_report(raw, part, sensor="accel")
+    norms = np.linalg.norm(part.apply(raw), axis=1)
+    assert rep.norm_min == pytest.approx(norms.min()) and rep.norm_max == pytest.approx(norms.max())
+    assert rep.rms == pytest.approx(np.sqrt(np.mean((norms - 1.0) ** 2)))
+    assert rep.rms_pct == pytest.approx(100 * rep.rms)
+    assert set(rep.stderr) == set(fit.param_names)
+    assert 40 <= rep.coverage_pct <= 65
+    text = rep.text()
+    assert "the top (+Z) of the sphere is empty" in text
+    assert "pointing straight up (flat, right side up)" in text
+    assert "coverage" in text and "standard errors" in text
+    d = rep.to_dict()
+    assert d["uniformity"] == pytest.approx(rep.norm_std / rep.norm_mean)
+
+
+def test_fit_auto_picks_the_model_the_data_need():
+    u = _sphere(600, seed=3)
+    rng = np.random.default_rng(4)
+    noise = rng.normal(scale=0.003, size=u.shape)
+    plain = u + [0.1, 0.0, -0.05] + noise
+    a = fit_auto(plain, radius=1.0)
+    assert a.model == "sphere" and "do not lower the residuals enough" in a.reason
+    gains = u / [1.08, 0.93, 1.0] + noise
+    assert fit_auto(gains, radius=1.0).model == "axis"
+    m = np.array([[1.0, 0.06, -0.04], [0.06, 1.0, 0.05], [-0.04, 0.05, 1.0]])
+    skew = u @ np.linalg.inv(m).T + noise
+    b = fit_auto(skew, radius=1.0)
+    assert b.model == "full" and "lower the residuals by more than their price" in b.reason
+    assert set(b.scores) == {"sphere", "axis", "full"}
+
+
+def test_fit_robust_finds_planted_outliers():
+    u = _sphere(300, seed=5)
+    rng = np.random.default_rng(6)
+    raw = u * 480 + [120, -60, 30] + rng.normal(scale=3, size=u.shape)
+    bad = [10, 50, 51, 200, 280]
+    raw[bad] = raw[bad] * 1.4 - np.array([120, -60, 30]) * 0.4  # spikes (40 % too long)
+    r = fit_robust(raw, model="full")
+    assert set(bad) <= set(r.rejected.tolist()) and len(r.rejected) < 30
+    assert r.converged
+    np.testing.assert_allclose(r.fit.offset, [120, -60, 30], atol=2)
+    plain = tc.fit_ellipsoid(raw, model="full")
+    assert r.fit.rms < plain.rms
+    none = fit_robust(raw, model="full", sigma=0)
+    assert len(none.rejected) == 0
+    with pytest.raises(tc.CalibrationError, match="unknown model"):
+        fit_robust(raw, model="round")
+
+
+def test_magneto_rule_on_raw_lengths_reproduces_magneto(realdata):
+    raw = np.loadtxt(realdata / "icm20948-magneto" / "icm_20948_cal_acc.csv", delimiter=",")
+    r = fit_robust(raw, model="full", lengths="raw", max_rounds=1)
+    # Magneto 1.4's log (cal_acc_1.lis) lists these rejections at 2 sigma
+    assert r.rejected.tolist() == [20, 67, 78, 79, 107, 153, 166, 195, 222, 242, 259]
+
+
+@pytest.mark.skipif(shutil.which("true") is None, reason="no POSIX tools")
+def test_report_figure(realdata, tmp_path):
+    """Produce the README figure from real data (looked at by eye when it changed)."""
+    pytest.importorskip("matplotlib")
+    raw = np.loadtxt(realdata / "icm20948-magneto" / "icm_20948_cal_mag.csv", delimiter=",")
+    r = fit_robust(raw, model="auto")
+    part = tc.SensorCalibration.from_fit(r.fit, points=raw[r.inliers], rejected=r.rejected)
+    rep = quality_report(raw, part, sensor="mag", model_reason=r.model_reason)
+    assert rep.rejected == r.rejected.tolist()
+    out = plot_report(raw, part, tmp_path / "report.png", report=rep)
+    data = out.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and 30_000 < len(data) < 300_000
+    if os.environ.get("TRIAXCAL_UPDATE_DOCS"):
+        (ROOT / "docs" / "report-example.png").write_bytes(data)
+
+
+def test_plot_needs_matplotlib(monkeypatch, tmp_path):
+    import triaxcal.report as rp
+
+    monkeypatch.setattr(rp, "have_matplotlib", lambda: False)
+    part = tc.SensorCalibration(offset=[0, 0, 0], matrix=np.eye(3), radius=1.0)
+    with pytest.raises(tc.CalibrationError, match=r"pip install 'triaxcal\[plot\]'"):
+        plot_report(_sphere(50), part, tmp_path / "x.png")
