@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -111,7 +110,6 @@ def test_magneto_rule_on_raw_lengths_reproduces_magneto(realdata):
     assert r.rejected.tolist() == [20, 67, 78, 79, 107, 153, 166, 195, 222, 242, 259]
 
 
-@pytest.mark.skipif(shutil.which("true") is None, reason="no POSIX tools")
 def test_report_figure(realdata, tmp_path):
     """Produce the README figure from real data (looked at by eye when it changed)."""
     pytest.importorskip("matplotlib")

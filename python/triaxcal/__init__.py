@@ -18,6 +18,14 @@ from .detect import (
 )
 from .calibration import Calibration, SensorCalibration, TemperatureTerms
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
+from .export import (
+    c_fixed_header,
+    c_header,
+    decode_motioncal,
+    encode_motioncal,
+    motioncal_packet,
+    write_outputs,
+)
 from .fit import (
     MODELS,
     BatchFit,
@@ -56,6 +64,8 @@ from .methods import (
     six_position,
     tilt_rig,
 )
+from .report import QualityReport, plot_report, quality_report
+from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
     "tilt_rig",
@@ -105,4 +115,17 @@ __all__ = [
     "sim",
     "sphere_error",
     "still_intervals",
+    "AutoFit",
+    "QualityReport",
+    "RobustFit",
+    "c_fixed_header",
+    "c_header",
+    "decode_motioncal",
+    "encode_motioncal",
+    "fit_auto",
+    "fit_robust",
+    "motioncal_packet",
+    "plot_report",
+    "quality_report",
+    "write_outputs",
 ]
