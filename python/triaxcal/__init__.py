@@ -66,8 +66,12 @@ from .methods import (
 )
 from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
+from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
 
 __all__ = [
+    "fit_temperature",
+    "TemperatureRangeWarning",
+    "TemperatureModel",
     "tilt_rig",
     "six_position",
     "ferraris",
