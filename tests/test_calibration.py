@@ -145,3 +145,28 @@ def test_missing_part_and_bad_raw():
         cal.apply([[1, np.nan, 3]])
     with pytest.raises(tc.CalibrationError, match="shape"):
         cal.apply([[1, 2]])
+
+
+def test_from_temperature_model_matches_the_model():
+    temperature = pytest.importorskip("triaxcal.temperature")
+    rng = np.random.default_rng(7)
+    n = 600
+    t = np.linspace(10.0, 50.0, n)
+    dt = t - 30.0
+    truth = rng.normal(size=(n, 3)) * 100.0  # deg/s
+    sens = np.array([131.0, 130.0, 132.0])[None] * (1 + np.outer(dt, [2e-3, -1e-3, 1.5e-3]))
+    off = np.array([20.0, -10.0, 5.0]) + np.outer(dt, [0.8, -0.5, 0.3]) + np.outer(dt**2,
+                                                                               [0.01, 0, 0])
+    raw = off + truth * sens + rng.normal(scale=0.05, size=(n, 3))
+    model = temperature.fit_temperature(raw, t, degree=2, reference_degC=30.0, truth=truth,
+                                        gain="diag")
+    part = tc.SensorCalibration.from_temperature_model(model, unit="deg/s")
+    assert part.temperature.temp_ref_c == 30.0
+    assert part.temperature.temp_range_c == (10.0, 50.0)
+    assert np.all(part.temperature.offset_poly[0] == 0)
+    got = part.apply(raw, temperature=t)
+    want = model.apply(raw, t)
+    assert np.max(np.abs(got - want)) < 1e-3 * np.max(np.abs(want))
+    assert part.stats["temperature_gain_error"] < 1e-3
+    back = tc.Calibration.from_json(tc.Calibration(gyro=part).to_json())
+    np.testing.assert_allclose(back.apply(raw, sensor="gyro", temperature=t), got, rtol=1e-12)

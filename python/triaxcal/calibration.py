@@ -363,6 +363,71 @@ class SensorCalibration:
             source=source,
         )
 
+    @classmethod
+    def from_temperature_model(
+        cls,
+        model: Any,
+        *,
+        raw_unit: str = "counts",
+        unit: str = "counts",
+        radius: float | None = None,
+        source: str | None = None,
+        input_sha256: str | None = None,
+    ) -> SensorCalibration:
+        """Build a part from a :class:`triaxcal.temperature.TemperatureModel`.
+
+        That model reads ``calibrated = inv(S(T)) @ (raw - offset(T))`` with polynomial
+        ``offset(T)`` (``offset_coef``) and sensitivity ``S(T)`` (``sens_coef``). Here:
+        ``offset = offset_coef[0]``, ``matrix = inv(sens_coef[0])`` (the calibration at
+        ``reference_degC``), ``offset_poly = offset_coef`` with row 0 zeroed, and -- when the
+        sensitivity changes with temperature -- ``gain_poly``: a least-squares polynomial
+        (degree + 1) over the fitted range of the diagonal of ``S(T0) @ inv(S(T)) - 1``, the
+        per-raw-axis gain. Off-diagonal drift cannot be held in ``gain_poly``; the largest
+        relative error of the approximation over the range is recorded in
+        ``stats["temperature_gain_error"]``.
+        """
+        oc = np.asarray(model.offset_coef, dtype=np.float64)
+        sc = np.asarray(model.sens_coef, dtype=np.float64)
+        if oc.ndim != 2 or oc.shape[1] != 3 or sc.shape != (oc.shape[0], 3, 3):
+            raise CalibrationError(
+                "model must have offset_coef (degree + 1, 3) and sens_coef (degree + 1, 3, 3)"
+            )
+        t0 = float(model.reference_degC)
+        lo, hi = float(model.t_min_degC), float(model.t_max_degC)
+        s0 = sc[0]
+        try:
+            m0 = np.linalg.inv(s0)
+        except np.linalg.LinAlgError:
+            raise CalibrationError("the model's sensitivity at the reference is singular") from None
+        opoly = oc.copy()
+        opoly[0] = 0.0
+        gpoly = None
+        stats: dict[str, Any] = {"n": int(getattr(model, "n", 0))}
+        if np.any(sc[1:] != 0) and hi > lo:
+            ts = np.linspace(lo, hi, 64)
+            dts = ts - t0
+            powers = dts[:, None] ** np.arange(len(sc))
+            sens = np.tensordot(powers, sc, axes=(-1, 0))  # (64, 3, 3)
+            rel = s0[None] @ np.linalg.inv(sens)  # (64, 3, 3): diag(g) ideally
+            g = np.diagonal(rel, axis1=1, axis2=2) - 1.0
+            deg = len(sc)  # model degree + 1
+            vander = dts[:, None] ** np.arange(deg + 1)
+            coef, *_ = np.linalg.lstsq(vander, g, rcond=None)
+            gpoly = coef
+            approx = vander @ coef
+            full = m0[None] @ (np.eye(3)[None] * (1 + approx)[:, None, :])
+            exact = np.linalg.inv(sens)
+            err = np.max(np.abs(full - exact)) / np.max(np.abs(m0))
+            stats["temperature_gain_error"] = float(err)
+        terms = TemperatureTerms(temp_ref_c=t0, temp_range_c=(lo, hi), offset_poly=opoly,
+                                 gain_poly=gpoly)
+        rms = getattr(model, "rms", None)
+        if rms is not None:
+            stats["temperature_rms"] = np.asarray(rms, dtype=float).tolist()
+        return cls(offset=oc[0], matrix=m0, raw_unit=raw_unit, unit=unit, radius=radius,
+                   model=f"temperature-poly{len(oc) - 1}", temperature=terms, stats=stats,
+                   source=source, input_sha256=input_sha256)
+
     # -- use ------------------------------------------------------------------------------
     def apply(self, raw: Any, temperature: Any = None) -> np.ndarray:
         """Calibrate raw readings: ``((raw - offset(T)) * gain(T)) @ matrix.T``.
