@@ -322,7 +322,7 @@ class SensorCalibration:
         Examples
         --------
         >>> import numpy as np, triaxcal as tc
-        >>> pts = np.array([[2, 0, 0], [0, 1, 0], [0, -1, 0], [1, 0, 1], [1, 0, -1], [1, 1, 0.1]])
+        >>> pts = np.array([[2, 0, 0], [0, 0, 0], [1, 1, 0], [1, -1, 0], [1, 0, 1], [1, 0, -1]])
         >>> part = tc.SensorCalibration.from_fit(tc.fit_sphere(pts, radius=1.0), unit="g")
         >>> part.unit, np.round(part.offset, 6).tolist()
         ('g', [1.0, 0.0, 0.0])
