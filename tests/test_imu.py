@@ -135,3 +135,10 @@ def test_poses_in_one_plane_are_reported():
                            rate_hz=100)
     with pytest.raises(tc.CalibrationError, match="accelerometer fit failed on the 12"):
         tc.calibrate_imu(rec.accel, rec.gyro, rate_hz=100, gravity=1.0, rest_s=5.0)
+
+
+def test_a_gyro_that_saw_no_rotation_is_reported():
+    _, rec = _sim(seed=4, n=15)
+    flat = np.random.default_rng(0).normal(0, 4, rec.gyro.shape) + [100, -50, 20]
+    with pytest.raises(tc.CalibrationError, match="rotations too small for the gyro: only 0 of"):
+        tc.calibrate_imu(rec.accel, flat, rate_hz=100, gravity=1.0, rest_s=5.0)

@@ -386,7 +386,9 @@ def gyro_gains(
                                       f"<= {max_fraction * ang:g}"))
         else:
             used.append(r)
-    gains = {(ax, d): [] for ax in range(3) for d in ("ccw", "cw")}
+    gains: dict[tuple[int, str], list[float]] = {
+        (ax, d): [] for ax in range(3) for d in ("ccw", "cw")
+    }
     for r in used:
         gains[(r.axis, r.direction)].append(abs(float(r.integral[r.axis])) / ang)
     ccw = np.array([np.mean(gains[(a, "ccw")]) if gains[(a, "ccw")] else np.nan for a in range(3)])

@@ -426,6 +426,18 @@ def calibrate_imu(
     g1 = dirs[1:][use]
     problem = _GyroProblem(u, dt, g0, g1)
 
+    # the gyro must have registered the moves: each integral well above its noise
+    noise = float(np.linalg.norm(np.concatenate([g[s:e] for s, e in iv]).std(axis=0)))
+    lens = np.array([e - s for s, e in sel])
+    integ = np.linalg.norm(np.einsum("pl,plk->pk", dt, 0.5 * (u[:, 1:] + u[:, :-1])), axis=1)
+    felt = integ > 10 * noise * np.median(np.diff(tt)) * np.sqrt(lens)
+    if felt.sum() < 3:
+        raise CalibrationError(
+            f"rotations too small for the gyro: only {int(felt.sum())} of {len(sel)} moves "
+            "between still poses show a rotation above the gyro's noise; is the gyro channel "
+            "connected, and are acc and gyro from the same recording?"
+        )
+
     # excitation: integrated |rate| per raw axis, each must carry a share of the motion
     excite = np.array([np.sum(np.abs(u[j, :, :]) * np.r_[dt[j], 0][:, None], axis=0)
                        for j in range(len(sel))]).sum(axis=0)
@@ -437,10 +449,10 @@ def calibrate_imu(
         )
 
     if gyro_scale_guess is None:
-        s0 = _scale_search(problem, u, dt, g0, g1)
+        scale0 = _scale_search(problem, u, dt, g0, g1)
     else:
-        s0 = float(gyro_scale_guess)
-    m0 = s0 * np.eye(3)
+        scale0 = float(gyro_scale_guess)
+    m0 = scale0 * np.eye(3)
     r0 = problem.residuals(m0[None])[0]
     mg, iters = _lm(problem, m0, max_iter, tol)
     r1 = problem.residuals(mg[None])[0]
