@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import runpy
 from pathlib import Path
 
 import numpy as np
@@ -132,3 +133,19 @@ def test_plot_needs_matplotlib(monkeypatch, tmp_path):
     part = tc.SensorCalibration(offset=[0, 0, 0], matrix=np.eye(3), radius=1.0)
     with pytest.raises(tc.CalibrationError, match=r"pip install 'triaxcal\[plot\]'"):
         plot_report(_sphere(50), part, tmp_path / "x.png")
+
+
+def test_readme_export_section_python_runs(realdata, tmp_path, monkeypatch, capsys):
+    """The Python example of the README's export section runs as written."""
+    text = (ROOT / "README.md").read_text()
+    section = text.split("<!-- section: export (owner: export) -->", 1)[1].split(
+        "<!-- /section -->", 1)[0]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    raw = np.loadtxt(realdata / "icm20948-magneto" / "icm_20948_cal_acc.csv", delimiter=",")
+    monkeypatch.chdir(tmp_path)
+    script = tmp_path / "readme_example.py"
+    script.write_text(code)
+    runpy.run_path(str(script), init_globals={"raw": raw})
+    assert tc.Calibration.load(tmp_path / "cal.json").sensor_id == "board-7"
+    assert (tmp_path / "out" / "imu_calibration.h").is_file()
+    assert "calibration report" in capsys.readouterr().out

@@ -556,7 +556,7 @@ class SensorCalibration:
         )
 
 
-def _norm_stats(norms: np.ndarray) -> dict[str, float]:
+def _norm_stats(norms: np.ndarray) -> dict[str, float | None]:
     mean = float(np.mean(norms))
     std = float(np.std(norms, ddof=1)) if norms.size > 1 else 0.0
     return {
@@ -564,7 +564,7 @@ def _norm_stats(norms: np.ndarray) -> dict[str, float]:
         "max": float(np.max(norms)),
         "mean": mean,
         "std": std,
-        "std_over_mean": std / mean if mean else float("nan"),
+        "std_over_mean": std / mean if mean else None,
     }
 
 
