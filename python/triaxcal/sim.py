@@ -851,7 +851,8 @@ _MODE_OF = {None: "P", "binary": "B", "framed": "F", "text": "T", "raw": "R"}
 
 @dataclass(frozen=True)
 class Faults:
-    """Faults a :class:`SimDevice` injects into the bytes it sends (per frame, at random).
+    """Faults a :class:`SimDevice` injects into the bytes it sends (at random, at most one
+    per frame; damage to a frame's delimiter also spoils the next frame, marked so in the log).
 
     Attributes
     ----------
@@ -1019,6 +1020,8 @@ class SimDevice:
         self._silent_until = 0.0
         self._packet: bytearray | None = None
         self._packet_t = 0.0
+        self._damage_next = False
+        self._requests: list[tuple[float, threading.Event]] = []
 
     # -- life cycle
     def start(self) -> SimDevice:
@@ -1058,10 +1061,10 @@ class SimDevice:
     def unplug(self, seconds: float) -> None:
         """Pull the cable for ``seconds`` (real time): the port vanishes, then comes back on
         the same :attr:`port` path with the device rebooted (boot mode, polled)."""
-        with self._lock:
-            self._unplug_until = time.monotonic() + float(seconds)
-            self._unplug_now()
-            self.unplugs += 1
+        done = threading.Event()
+        self._requests.append((float(seconds), done))
+        if self._thread is not None and self._thread.is_alive():
+            done.wait(timeout=2.0)
 
     def silence(self, seconds: float) -> None:
         """Stop answering and streaming for ``seconds`` (real time); commands are ignored."""
@@ -1115,6 +1118,12 @@ class SimDevice:
         n = len(self._frames)
         while not self._stop.is_set():
             now = time.monotonic()
+            while self._requests:  # unplug requests, served here so no fd is closed under us
+                seconds, done = self._requests.pop(0)
+                self._unplug_until = now + seconds
+                self._unplug_now()
+                self.unplugs += 1
+                done.set()
             with self._lock:
                 if self._master is None:
                     if now >= self._unplug_until:
@@ -1226,10 +1235,13 @@ class SimDevice:
         f, rng = self.faults, self._frng
         if self.wrong_baud:
             return bytes(self._brng.integers(0, 256, len(frame), dtype=np.uint8)), b"", False
-        intact = True
+        intact = not self._damage_next
+        self._damage_next = False
         junk = b""
         lines = protocol in ("text", "raw")
-        if f.garbage_prob and rng.random() < f.garbage_prob:
+        data = bytearray(frame)
+        r = rng.random()  # at most one fault per frame
+        if r < f.garbage_prob:
             n = int(rng.integers(1, max(1, f.garbage_max) + 1))
             if lines:
                 alphabet = np.r_[1:9, 11:13, 14:32, 128:256].astype(np.uint8)
@@ -1242,18 +1254,21 @@ class SimDevice:
                 glued = protocol != "framed" or not junk.endswith(b"\x00")
             if glued or polled:
                 intact = False
-        data = bytearray(frame)
-        if f.drop_prob and rng.random() < f.drop_prob:
+        elif r < f.garbage_prob + f.drop_prob:
             if lines and f.drop_where == "structure":
                 where = [i for i, c in enumerate(data) if c in b",\n"]
             else:
                 where = list(range(len(data)))
-            del data[int(rng.choice(where))]
+            i = int(rng.choice(where))
+            del data[i]
             intact = False
-        if f.flip_prob and rng.random() < f.flip_prob:
+            # a lost delimiter glues the frame to the next one
+            self._damage_next = not polled and i == len(frame) - 1
+        elif r < f.garbage_prob + f.drop_prob + f.flip_prob:
             i = int(rng.integers(len(data)))
             data[i] ^= 1 << int(rng.integers(8))
             intact = False
+            self._damage_next = not polled and i == len(frame) - 1
         return bytes(data), junk, intact
 
     def _queue(self, data: bytes, entry: SentFrame | None) -> None:

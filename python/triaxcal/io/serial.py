@@ -203,7 +203,7 @@ class SerialReader:
         stream: bool = False,
         request_byte: Any = b"!",
         switch_mode: bool = True,
-        open_timeout_s: float = 2.0,
+        open_timeout_s: float = 1.0,
         silent_s: float = 3.0,
         garbage_s: float = 3.0,
         poll_timeout_s: float = 0.1,

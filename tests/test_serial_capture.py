@@ -1,0 +1,436 @@
+"""Capture through real pseudo-terminals: the simulated board (SimDevice) on one end, the
+SerialReader / capture / CLI on the other. The device logs every frame it sent, and the
+session CSV is checked row by row against that log."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+from triaxcal import sim
+from triaxcal.capture import (
+    SessionWriter,
+    capture,
+    channel_names,
+    coverage,
+    read_session,
+    suggest_turn,
+)
+from triaxcal.cli import main
+from triaxcal.errors import CalibrationError
+from triaxcal.io.protocol import encode_motioncal_packet, parse_cal_lines
+from triaxcal.io.serial import (
+    CaptureError,
+    GarbageError,
+    PortNotFoundError,
+    Record,
+    SerialReader,
+    SilentDeviceError,
+    parse_request_byte,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# gyro offsets 10 = 0A 00, 2570 = 0A 0A, -246 = 0A FF: while the board is still, every binary
+# frame carries 0x0A ('\n') bytes inside its data
+NEWLINE_GYRO = {"offset": (10, 2570, -246), "noise": 0.0}
+
+
+def newline_imu(seed: int = 3) -> sim.SimIMU:
+    return sim.SimIMU(seed, gyro=NEWLINE_GYRO)
+
+
+def device(protocol: str | None = None, *, speed: float = 10.0, faults=None, seed: int = 3,
+           **kw) -> sim.SimDevice:
+    script = sim.globe_script(hold_s=1.0, latitudes=3, turns=4, seed=seed)
+    return sim.SimDevice(newline_imu(seed), script, speed=speed, faults=faults, seed=seed, **kw)
+
+
+def session_rows(path: Path) -> list[tuple[int, ...]]:
+    """The value columns of a session CSV, checking every row is complete."""
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[0] == "t"
+    rows = []
+    for line in lines[1:]:
+        parts = line.split(",")
+        assert len(parts) == len(header), f"incomplete row {line!r}"
+        float(parts[0])
+        rows.append(tuple(int(v) for v in parts[1:]))
+    return rows
+
+
+def align(rows, sent):
+    """Match each row to a sent frame at increasing positions; return (positions, wrong)."""
+    vals = [f.values for f in sent]
+    positions, wrong = [], []
+    j = 0
+    for r in rows:
+        try:
+            k = vals.index(r, j)
+        except ValueError:
+            wrong.append(r)
+            continue
+        positions.append(k)
+        j = k + 1
+    return positions, wrong
+
+
+def check_exact(rows, sent):
+    """No wrong row; every intact frame between the first and last row was captured."""
+    assert rows, "nothing captured"
+    positions, wrong = align(rows, sent)
+    assert not wrong, f"{len(wrong)} rows that the device never sent, e.g. {wrong[:2]}"
+    # the intact frames in that span are a subsequence of the rows (exact even when a polled
+    # board repeats a sample, so that values alone cannot say which reply a row came from)
+    intact = [f.values for f in sent[positions[0]:positions[-1] + 1] if f.intact]
+    it = iter(rows)
+    missing = [v for v in intact if not any(v == r for r in it)]
+    assert not missing, f"{len(missing)} intact frames not captured, e.g. {missing[:2]}"
+    return positions
+
+
+def has_newline_bytes(sent, protocol):
+    from triaxcal.io.protocol import encode_binary
+    return sum(b"\n" in encode_binary(f.values)[:-1] for f in sent)
+
+
+# ----------------------------------------------------------------------- clean streams
+
+
+@pytest.mark.parametrize(
+    "protocol,stream",
+    [("binary", False), ("binary", True), ("framed", False), ("text", False), ("raw", False)],
+)
+def test_every_protocol_captures_exactly_what_was_sent(tmp_path, protocol, stream):
+    out = tmp_path / "s.csv"
+    with device(speed=10.0) as dev:
+        reader = SerialReader(dev.port, protocol=protocol,
+                              channels=None if protocol == "raw" else 10, stream=stream)
+        res = capture(reader, out, samples=400, progress=None, handle_sigint=False)
+        sent = list(dev.sent)
+    rows = session_rows(out)
+    assert len(rows) == res.samples == 400
+    positions = check_exact(rows, sent)
+    if protocol != "binary" or stream:
+        # streaming: a contiguous run of frames, none lost
+        assert positions == list(range(positions[0], positions[0] + 400))
+    else:
+        assert reader.stats.polls >= 400 and reader.stats.poll_failures == 0
+    header = out.read_text().splitlines()[0]
+    assert header == "t," + ",".join(channel_names(protocol, 9 if protocol == "raw" else 10))
+    if protocol == "binary":
+        assert has_newline_bytes(sent[positions[0]:positions[-1] + 1], protocol) > 100
+
+
+def test_seven_channel_board(tmp_path):
+    out = tmp_path / "s7.csv"
+    with device(channels=7) as dev:
+        res = capture(SerialReader(dev.port, protocol="binary", channels=7), out, samples=50,
+                      progress=None, handle_sigint=False)
+        sent = list(dev.sent)
+    assert out.read_text().splitlines()[0] == "t,ax,ay,az,gx,gy,gz,temp"
+    check_exact(session_rows(out), sent)
+    assert res.samples == 50
+
+
+# ----------------------------------------------------------------------- injected faults
+
+
+@pytest.mark.parametrize(
+    "protocol,faults",
+    [
+        ("binary", sim.Faults(garbage_prob=0.05, drop_prob=0.05, seed=1)),  # polled
+        ("framed", sim.Faults(garbage_prob=0.05, drop_prob=0.05, flip_prob=0.05, seed=2)),
+        ("text", sim.Faults(garbage_prob=0.05, drop_prob=0.05, drop_where="structure", seed=3)),
+        ("raw", sim.Faults(garbage_prob=0.05, drop_prob=0.05, drop_where="structure", seed=4)),
+    ],
+)
+def test_faults_lose_only_damaged_frames_and_never_write_a_wrong_row(tmp_path, protocol, faults):
+    out = tmp_path / "f.csv"
+    with device(speed=10.0, faults=faults) as dev:
+        reader = SerialReader(dev.port, protocol=protocol,
+                              channels=None if protocol == "raw" else 10, poll_timeout_s=0.05)
+        capture(reader, out, samples=500, progress=None, handle_sigint=False)
+        sent = list(dev.sent)
+    rows = session_rows(out)
+    positions = check_exact(rows, sent)
+    span = sent[positions[0]:positions[-1] + 1]
+    damaged = sum(not f.intact for f in span)
+    assert damaged >= 20, "the test needs faults to mean anything"
+    st = reader.stats
+    if protocol == "binary":
+        assert st.poll_failures >= damaged // 2
+    elif protocol == "framed":
+        assert st.decoder.dropped_frames > 0 and st.decoder.lost_frames >= damaged // 2
+    else:
+        assert st.decoder.lines_skipped > 0
+
+
+def test_legacy_stream_corruption_costs_only_neighbouring_frames(tmp_path):
+    faults = sim.Faults(garbage_prob=0.03, drop_prob=0.03, seed=5)
+    out = tmp_path / "b.csv"
+    with device(speed=10.0, faults=faults) as dev:
+        reader = SerialReader(dev.port, protocol="binary", channels=10, stream=True)
+        capture(reader, out, samples=800, progress=None, handle_sigint=False)
+        sent = list(dev.sent)
+    rows = session_rows(out)
+    positions, wrong = align(rows, sent)
+    bad = [k for k, f in enumerate(sent) if not f.intact]
+    assert len(bad) >= 20
+    # wrong rows are possible without a checksum, but must stay rare
+    assert len(wrong) <= max(1, len(bad) // 10), wrong
+    got = set(positions)
+    lo, hi = positions[0], positions[-1]
+    far = [k for k in range(lo, hi + 1)
+           if sent[k].intact and min(abs(k - b) for b in bad) > 3]
+    lost_far = [k for k in far if k not in got]
+    assert not lost_far, f"intact frames far from any damage were lost: {lost_far[:5]}"
+    near_lost = [k for k in range(lo, hi + 1) if sent[k].intact and k not in got]
+    assert len(near_lost) <= 3 * len(bad)
+    assert has_newline_bytes(sent[lo:hi + 1], "binary") > 200
+
+
+# ----------------------------------------------------------------------- stopping
+
+
+def test_ctrl_c_stops_cleanly_with_everything_saved(tmp_path):
+    out = tmp_path / "c.csv"
+    with device(speed=5.0) as dev:
+        proc = subprocess.Popen(
+            [sys.executable, "-c",
+             "import sys; from triaxcal.cli import main; sys.exit(main(sys.argv[1:]))",
+             "capture", "--port", dev.port, "--protocol", "framed", "--out", str(out)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and (
+            not out.exists() or out.read_text().count("\n") < 200
+        ):
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+        sent = list(dev.sent)
+    assert proc.returncode == 0, err
+    assert "stopped by Ctrl-C" in err
+    rows = session_rows(out)  # every row complete
+    assert len(rows) >= 200
+    check_exact(rows, sent)
+    assert f"{len(rows)} rows" in err
+
+
+def test_stop_event_and_poses_limit(tmp_path):
+    with device(speed=40.0, loop=False) as dev:
+        res = capture(SerialReader(dev.port, protocol="framed", channels=10), tmp_path / "a.csv",
+                      stop=dev.finished, progress=None, handle_sigint=False)
+        sent = list(dev.sent)
+    assert res.stopped_by == "stop"
+    positions = check_exact(session_rows(tmp_path / "a.csv"), sent)
+    assert positions[-1] == len(sent) - 1  # drained to the last frame
+    assert len(res.poses) >= 6 and res.coverage > 0.2
+    with device(speed=20.0) as dev:
+        res = capture(SerialReader(dev.port, protocol="framed", channels=10), tmp_path / "p.csv",
+                      poses=3, progress=None, handle_sigint=False, bell=False)
+    assert res.stopped_by == "poses" and len(res.poses) == 3
+
+
+def test_progress_line_bell_and_suggestion(tmp_path):
+    import io
+
+    buf = io.StringIO()
+    with device(speed=20.0) as dev:
+        capture(SerialReader(dev.port, protocol="framed", channels=10), tmp_path / "a.csv",
+                poses=3, progress=buf, bell=True, handle_sigint=False)
+    text = buf.getvalue()
+    assert text.count("\a") == 3
+    assert "3/3 poses" in text and "sphere" in text and "next: " in text
+
+
+# ----------------------------------------------------------------------- pulled cable
+
+
+def test_unplug_and_return_resumes(tmp_path):
+    out = tmp_path / "u.csv"
+    with device(speed=5.0) as dev:
+        timer = threading.Timer(0.5, dev.unplug, args=(0.6,))
+        timer.start()
+        reader = SerialReader(dev.port, protocol="framed", channels=10)
+        res = capture(reader, out, duration_s=2.0, progress=None, handle_sigint=False)
+        timer.join()
+        sent = list(dev.sent)
+    kinds = [k for k, _ in res.events]
+    assert "disconnected" in kinds and "reconnected" in kinds
+    assert res.stats.disconnects == 1 and res.stats.reconnects == 1
+    rows = session_rows(out)
+    positions, wrong = align(rows, sent)
+    assert not wrong
+    # frames were captured both before and after the gap; the gap is in the sample index
+    idx = np.array([sent[k].index for k in positions])
+    gaps = np.diff(idx)
+    assert gaps.max() >= 0.5 * 5.0 * 100  # ~0.6 s real at 5x, 100 Hz
+    assert (idx > idx[np.argmax(gaps)]).sum() > 100
+    # after the reconnect the board (rebooted to polled mode) was switched to framed again
+    assert dev.received.count(b"F") >= 2
+
+
+def test_device_going_quiet_mid_capture_is_a_warning_not_an_error(tmp_path):
+    with device(speed=5.0) as dev:
+        threading.Timer(0.4, dev.silence, args=(0.8,)).start()
+        reader = SerialReader(dev.port, protocol="framed", channels=10, silent_s=0.4)
+        res = capture(reader, tmp_path / "q.csv", duration_s=1.8, progress=None,
+                      handle_sigint=False)
+    kinds = [k for k, _ in res.events]
+    assert "silent" in kinds and "resumed" in kinds
+    assert res.samples > 300
+
+
+def test_reader_gives_up_when_port_does_not_return():
+    from triaxcal.io.serial import DisconnectedError
+
+    with device(speed=5.0, mode="F") as dev:
+        reader = SerialReader(dev.port, protocol="framed", channels=10, reconnect_timeout_s=0.5)
+        reader.open()
+        got = reader.read()
+        dev.unplug(30.0)
+        t0 = time.monotonic()
+        with pytest.raises(DisconnectedError, match="did not come back"):
+            while True:
+                got += reader.read()
+        assert time.monotonic() - t0 < 3.0
+        reader.close()
+
+
+# ----------------------------------------------------------------------- clear errors
+
+
+def test_nonexistent_port_is_reported_quickly(tmp_path, capsys):
+    t0 = time.monotonic()
+    with pytest.raises(PortNotFoundError, match="does not exist"):
+        SerialReader(str(tmp_path / "ttyNOPE"), protocol="framed").open()
+    assert time.monotonic() - t0 < 4.0
+    out = tmp_path / "x.csv"
+    rc = main(["capture", "--port", str(tmp_path / "ttyNOPE"), "--protocol", "text",
+               "--out", str(out)])
+    assert rc == 1
+    assert "does not exist" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_silent_device_is_reported_quickly(tmp_path):
+    with device() as dev:
+        dev.silence(60.0)
+        t0 = time.monotonic()
+        with pytest.raises(SilentDeviceError, match="did not answer the request byte"):
+            capture(SerialReader(dev.port, protocol="binary", channels=10), tmp_path / "s.csv",
+                    progress=None, handle_sigint=False)
+        assert time.monotonic() - t0 < 5.0
+    # the header was written, and the file is a valid (empty) session
+    assert (tmp_path / "s.csv").read_text().startswith("t,ax,")
+
+
+def test_garbage_only_stream_is_reported_quickly(tmp_path):
+    with device(mode="T", wrong_baud=True) as dev:
+        t0 = time.monotonic()
+        with pytest.raises(GarbageError, match="baud rate is probably wrong"):
+            capture(SerialReader(dev.port, protocol="text", channels=10, baud=9600),
+                    tmp_path / "g.csv", progress=None, handle_sigint=False)
+        assert time.monotonic() - t0 < 5.0
+    assert issubclass(GarbageError, CaptureError) and issubclass(CaptureError, ValueError)
+
+
+# ----------------------------------------------------------------------- device commands
+
+
+def test_motioncal_packet_is_echoed_and_mode_bytes_switch():
+    with device(speed=10.0) as dev, serial.Serial(dev.port, 115200, timeout=1) as port:
+        pkt = encode_motioncal_packet([0.1, -0.2, 0.3], [1, 2, 3], [10, -20, 30], 48.5,
+                                      [1.01, 0.99, 1.02, 0.01, -0.02, 0.03])
+        port.write(pkt)
+        time.sleep(0.2)
+        cal = parse_cal_lines(port.read(port.in_waiting))
+        assert cal["Cal1"] == pytest.approx((0.1, -0.2, 0.3, 1, 2, 3, 10, -20, 30, 48.5), abs=1e-4)
+        assert cal["Cal2"] == pytest.approx(
+            (1.01, 0.01, -0.02, 0.01, 0.99, 0.03, -0.02, 0.03, 1.02), abs=1e-4)
+        # a packet with a bad CRC is ignored
+        port.write(pkt[:-1] + bytes([pkt[-1] ^ 1]))
+        time.sleep(0.2)
+        assert port.in_waiting == 0
+        port.write(b"T")
+        time.sleep(0.2)
+        assert port.in_waiting > 100
+        port.write(b"P")
+        time.sleep(0.1)
+        port.reset_input_buffer()
+        time.sleep(0.2)
+        assert port.in_waiting == 0
+        assert dev.motioncal is not None
+
+
+# ----------------------------------------------------------------------- pieces
+
+
+def test_session_writer_modes(tmp_path):
+    p = tmp_path / "w.csv"
+    with SessionWriter(p, ("ax", "ay", "az")) as w:
+        w.write([Record(1.5, (1, 2, 3)), Record(2.0, (4, 5, 6.5))])
+    with pytest.raises(CalibrationError, match="exists already"):
+        SessionWriter(p, ("ax", "ay", "az"))
+    with pytest.raises(CalibrationError, match="header"):
+        SessionWriter(p, ("ax", "ay"), mode="append")
+    with open(p, "a") as f:
+        f.write("3.0,7,8")  # a row cut by a power cut
+    with SessionWriter(p, ("ax", "ay", "az"), mode="append") as w:
+        w.write([Record(4.0, (9, 10, 11))])
+    cols, data = read_session(p)
+    assert cols == ("t", "ax", "ay", "az")
+    np.testing.assert_array_equal(data[:, 1:], [[1, 2, 3], [4, 5, 6.5], [9, 10, 11]])
+    assert p.read_text().splitlines()[1] == "1.500000,1,2,3"
+
+
+def test_coverage_and_suggestions():
+    rec = sim.SimIMU(1).record(sim.globe_script(hold_s=0.5), rate_hz=50)
+    assert coverage(rec.pose_means("accel")) == 1.0
+    six = sim.SimIMU(1).record(sim.six_face_script(hold_s=0.5), rate_hz=50)
+    assert coverage(six.pose_means("accel")) == pytest.approx(6 / 24)
+    assert "every direction covered" in suggest_turn(rec.pose_means("accel"))
+    assert suggest_turn([[0, 0, 1.0]]).startswith("turn it upside down")
+    s = suggest_turn([[0, 0, 1.0], [0, 0, -1.0]], [0, 0, 1.0])
+    assert s.startswith("tilt the ") and "side" in s
+
+
+def test_request_byte_forms():
+    assert parse_request_byte("0x21") == b"!" == parse_request_byte("!")
+    assert parse_request_byte(33) == b"!" == parse_request_byte(b"!")
+    with pytest.raises(CaptureError):
+        parse_request_byte("0x1FF")
+
+
+def test_readme_capture_section_names_the_command():
+    text = (ROOT / "README.md").read_text()
+    start = text.index("<!-- section: capture")
+    section = text[start:text.index("<!-- /section -->", start)]
+    assert "triaxcal capture --port" in section and "triaxcal demo" in section
+
+
+@pytest.fixture(autouse=True)
+def _no_leftover_threads():
+    before = {t.ident for t in threading.enumerate()}
+    yield
+    deadline = time.monotonic() + 2
+    while time.monotonic() < deadline:
+        extra = [t for t in threading.enumerate()
+                 if t.ident not in before and t.name == "SimDevice" and t.is_alive()]
+        if not extra:
+            break
+        time.sleep(0.05)
+    assert not extra
+
+
+
