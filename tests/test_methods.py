@@ -147,3 +147,18 @@ def test_ferraris_names_missing_sections(realdata):
     small["y_rot"] = (parts["y_rot"][0][:40], parts["y_rot"][1][:40])
     with pytest.raises(tc.CalibrationError, match="rotations too small in y_rot"):
         tc.ferraris(small, rate_hz=204.8)
+
+
+def test_six_position_agrees_with_ferraris_on_real_faces(realdata):
+    parts = load_ferraris_annotated(realdata)
+    faces = np.array([parts[k][0].mean(axis=0) for k in ("x_p", "x_a", "y_p", "y_a", "z_p",
+                                                          "z_a")])
+    six = tc.six_position(faces, gravity=9.81)
+    fer = tc.ferraris(parts, rate_hz=204.8, gravity=9.81)
+    assert six.faces == {"+x": 0, "-x": 1, "+y": 2, "-y": 3, "+z": 4, "-z": 5}
+    # min/max sees the diagonal of Ferraris' sensitivity; cross-axis terms are a few per mille
+    a_mat = np.linalg.inv(fer.accel.matrix) * 9.81  # counts per g
+    np.testing.assert_allclose(six.counts_per_g, np.diag(a_mat), rtol=1e-9)
+    np.testing.assert_allclose(six.counts_per_g, fer.accel_counts_per_g, rtol=0.005)
+    # offsets: per-axis midpoints vs the mean of all six faces, within a few counts
+    np.testing.assert_allclose(six.offset, fer.accel.offset, atol=40)

@@ -341,18 +341,15 @@ def gyro_gains(
     ang = float(angle_deg)
     if not (np.isfinite(ang) and ang > 0):
         raise CalibrationError(f"angle_deg must be > 0 (90 on a cube), got {angle_deg!r}")
-    rots = find_rotations(gyro, t=t, rate_hz=rate_hz, offset=offset, intervals=intervals,
-                          rest_s=rest_s)
     g = _as_rate(gyro)
-    if offset is None:
-        tt = _times(g.shape[0], t, rate_hz)
-        iv = intervals
-        if iv is None:
-            iv = detect_still(g, rate_hz=1.0 / float(np.median(np.diff(tt))), window_s=0.5,
-                              rest_s=rest_s, k=4.0, min_duration_s=0.5).intervals
-        off = gyro_bias(g, intervals=iv).offset
+    tt = _times(g.shape[0], t, rate_hz)
+    if intervals is None:
+        iv = detect_still(g, rate_hz=1.0 / float(np.median(np.diff(tt))), window_s=0.5,
+                          rest_s=rest_s, k=4.0, min_duration_s=0.5).intervals
     else:
-        off = _ro(offset)
+        iv = sorted((int(a), int(b)) for a, b in intervals)
+    off = gyro_bias(g, intervals=iv).offset if offset is None else _ro(offset)
+    rots = find_rotations(g, t=tt, offset=off, intervals=iv)
     rejected: list[Rejection] = []
     pure = []
     for r in rots:
