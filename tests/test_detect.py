@@ -76,12 +76,14 @@ def test_short_and_noisy_candidates_have_reasons():
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 10_000), cuts=st.lists(st.integers(0, 6000), max_size=30))
-def test_online_equals_offline_for_any_chunking(seed, cuts):
+@given(seed=st.integers(0, 10_000), cuts=st.lists(st.integers(0, 6000), max_size=30),
+       max_windows=st.sampled_from([None, 12, 15]), min_windows=st.sampled_from([2, 12]))
+def test_online_equals_offline_for_any_chunking(seed, cuts, max_windows, min_windows):
     x, _ = _recording(seed % 50, n_poses=8)
     x = np.hstack([x, np.arange(len(x))[:, None] * 1e-3])  # a 4th channel rides along
-    off = tc.detect_poses(x, max_windows=None)
-    on = tc.PoseDetector()
+    opts = {"max_windows": max_windows, "min_windows": min_windows, "window": 20}
+    off = tc.detect_poses(x, **opts)
+    on = tc.PoseDetector(**opts)
     got = []
     bounds = sorted({0, len(x), *[c % (len(x) + 1) for c in cuts]})
     for a, b in zip(bounds[:-1], bounds[1:]):
