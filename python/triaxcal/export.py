@@ -377,7 +377,7 @@ class FixedPoint:
     """
 
     offset: tuple[int, int, int]
-    matrix_q: tuple[tuple[int, int, int], ...]
+    matrix_q: tuple[tuple[int, ...], ...]
     bias_q: tuple[int, int, int]
     out_scale: float
     offset_frac_q: tuple[int, int, int]

@@ -486,8 +486,8 @@ def plot_report(
                   f"{rep.coverage_pct:.0f} %, {len(rep.rejected)} outliers of {rep.n}"),
         fontsize=13,
     )
-    kw_in = {"s": 9, "c": "#1f77b4", "alpha": 0.55, "linewidths": 0, "label": "used"}
-    kw_out = {"s": 30, "c": "#d62728", "marker": "x", "linewidths": 1.2, "label": "rejected"}
+    kw_in: dict[str, Any] = {"s": 9, "c": "#1f77b4", "alpha": 0.55, "linewidths": 0, "label": "used"}
+    kw_out: dict[str, Any] = {"s": 30, "c": "#d62728", "marker": "x", "linewidths": 1.2, "label": "rejected"}
     for col, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
         ax = fig.add_subplot(gs[0, col])
         ax.scatter(pts[keep, i], pts[keep, j], **kw_in)
@@ -524,7 +524,7 @@ def plot_report(
     # residual histogram
     ax = fig.add_subplot(gs[2, 0])
     res_in = norms[keep] - r
-    bins = np.histogram_bin_edges(norms - r, bins=40)
+    bins = np.histogram_bin_edges(norms - r, bins=40).tolist()
     ax.hist(res_in, bins=bins, color="#1f77b4", alpha=0.8, label="used")
     if (~keep).any():
         ax.hist(norms[~keep] - r, bins=bins, color="#d62728", alpha=0.8, label="rejected")

@@ -331,7 +331,8 @@ def run(args: argparse.Namespace) -> int:
                 f"{path} exists but is not a calibration file ({exc}); pass --new to replace it"
             ) from None
     if cal is None:
-        cal = Calibration(**{out.sensor: out.part}, sensor_id=args.sensor_id or "")
+        parts: dict[str, Any] = {out.sensor: out.part}
+        cal = Calibration(**parts, sensor_id=args.sensor_id or "")
         verb = "wrote"
     else:
         changes: dict[str, Any] = {out.sensor: out.part}
