@@ -6,6 +6,7 @@ Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multi
 
 from . import sim
 from ._core import __version__
+from .calibration import Calibration, SensorCalibration, TemperatureTerms
 from .detect import (
     Pose,
     PoseDetection,
@@ -16,7 +17,6 @@ from .detect import (
     detect_still,
     still_intervals,
 )
-from .calibration import Calibration, SensorCalibration, TemperatureTerms
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .export import (
     c_fixed_header,
