@@ -141,6 +141,9 @@ def test_fit_poses_export_formats(tmp_path, capsys):
     cal = tc.Calibration.load(cal_path)
     assert cal.sensor_id == "bench-7" and cal.accel.unit == "g"
     assert cal.accel.stats["poses"] is True and cal.accel.stats["n_input"] == 30
+    capsys.readouterr()
+    assert main(["report", str(cal_path)]) == 0  # re-detects the poses of the session
+    assert "readings        30 (" in capsys.readouterr().out
     np.testing.assert_allclose(cal.accel.offset, [300, -200, 150], atol=15)
     np.testing.assert_allclose(np.diag(cal.accel.matrix), 1 / np.array([16000, 16500, 16300]),
                                rtol=2e-3)

@@ -280,6 +280,9 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         "sigma": float(args.sigma),
         "rejection_rounds": int(rob.rounds),
     }
+    if args.poses:
+        extra["pose_window"] = int(args.window)
+        extra["units_per_g"] = float(args.units_per_g)
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
     from ..report import coverage

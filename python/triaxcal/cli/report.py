@@ -112,7 +112,11 @@ def run(args: argparse.Namespace) -> int:
             pts = table.data[:, cols]
             if part.stats.get("poses"):
                 from .fit import _pose_points
-                pts = _pose_points(table, cols, args)
+
+                same = argparse.Namespace(**vars(args))
+                same.window = int(part.stats.get("pose_window", args.window))
+                same.units_per_g = float(part.stats.get("units_per_g", args.units_per_g))
+                pts = _pose_points(table, cols, same)
             rej = part.stats.get("rejected") if table.sha256 == part.input_sha256 else None
             if rej is not None and (not rej or max(rej) < len(pts)):
                 rep = quality_report(pts, part, sensor=sensor, rejected=rej)
