@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import triaxcal as tc
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from triaxcal.export import (
     apply_fixed,
     c_fixed_header,
@@ -324,3 +326,31 @@ def test_write_outputs(cal, tmp_path):
     assert "imu_accel_apply_q" in paths["c-fixed"].read_text()
     assert "residual RMS" in paths["report_accel"].read_text()
     assert "motioncal" not in paths  # the fixture's magnetometer matrix is not symmetric
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    off=st.lists(st.floats(-3000, 3000), min_size=3, max_size=3),
+    diag=st.lists(st.floats(0.5, 2.0), min_size=3, max_size=3),
+    cross=st.lists(st.floats(-0.05, 0.05), min_size=6, max_size=6),
+    scale=st.sampled_from([1 / 16384, 1 / 131, 0.15, 1.0, 7.5]),
+    raw=st.lists(st.lists(st.integers(-32768, 32767), min_size=3, max_size=3), min_size=1,
+                 max_size=20),
+)
+def test_fixed_point_model_within_one_count_property(off, diag, cross, scale, raw):
+    m = np.diag(diag)
+    m[0, 1], m[0, 2], m[1, 2], m[1, 0], m[2, 0], m[2, 1] = cross
+    part = tc.SensorCalibration(offset=off, matrix=m * scale, unit="x")
+    fp = fixed_point(part)
+    exact = part.apply(np.array(raw, dtype=float)) * fp.out_scale
+    assert np.abs(apply_fixed(fp, raw) - exact).max() <= 1.0
+
+
+@settings(max_examples=80, deadline=None)
+@given(vals=st.lists(st.floats(-1e4, 1e4, width=32), min_size=16, max_size=16))
+def test_motioncal_round_trip_property(vals):
+    si = np.array([[vals[10], vals[13], vals[14]], [vals[13], vals[11], vals[15]],
+                   [vals[14], vals[15], vals[12]]])
+    pkt = encode_motioncal(accel_offset=vals[0:3], gyro_offset=vals[3:6], mag_offset=vals[6:9],
+                           field=vals[9], soft_iron=si)
+    assert decode_motioncal(pkt).values() == vals
