@@ -19,7 +19,10 @@ use rayon::prelude::*;
 /// assert!(out[0].is_ok() && out[1].is_err());
 /// ```
 pub fn fit_batch(sets: &[&[[f64; 3]]], opts: &FitOptions) -> Vec<Result<EllipsoidFit>> {
-    let inner = FitOptions { parallel: false, ..*opts };
+    let inner = FitOptions {
+        parallel: false,
+        ..*opts
+    };
     sets.par_iter()
         .map(|s| {
             std::panic::catch_unwind(|| fit_ellipsoid(s, &inner)).unwrap_or_else(|_| {

@@ -76,7 +76,11 @@ pub fn direction_spread(dirs: impl Iterator<Item = Vector3<f64>>) -> (f64, Vecto
     m /= n as f64;
     let e = SymmetricEigen::new(t);
     let i = e.eigenvalues.imin();
-    (e.eigenvalues[i], e.eigenvectors.column(i).into_owned(), m.norm())
+    (
+        e.eigenvalues[i],
+        e.eigenvectors.column(i).into_owned(),
+        m.norm(),
+    )
 }
 
 /// Counts of directions by the sensor axis they are closest to, in the order +X, -X, +Y, -Y,
@@ -141,15 +145,30 @@ mod tests {
         assert!(w[0].contains("+Z, -Z"), "{w:?}");
         let w = coverage_warnings(&[9, 9, 9, 9, 1, 1], s, &weak);
         assert!(w[0].contains("band") && w[0].contains("±Z"), "{w:?}");
-        let faces = [Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y(), Vector3::z(), -Vector3::z()];
+        let faces = [
+            Vector3::x(),
+            -Vector3::x(),
+            Vector3::y(),
+            -Vector3::y(),
+            Vector3::z(),
+            -Vector3::z(),
+        ];
         let (s, _, m) = direction_spread(faces.into_iter());
         assert!((s - 1.0 / 3.0).abs() < 1e-12 && m < 1e-12);
     }
 
     #[test]
     fn axis_ratio_bound() {
-        assert!(check_axis_ratio(&Matrix3::from_diagonal(&Vector3::new(1.0, 1.2, 0.9)), "full").is_ok());
-        let e = check_axis_ratio(&Matrix3::from_diagonal(&Vector3::new(2.2, 2.3, 0.2)), "full").unwrap_err();
+        assert!(check_axis_ratio(
+            &Matrix3::from_diagonal(&Vector3::new(1.0, 1.2, 0.9)),
+            "full"
+        )
+        .is_ok());
+        let e = check_axis_ratio(
+            &Matrix3::from_diagonal(&Vector3::new(2.2, 2.3, 0.2)),
+            "full",
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("factor of 11.5"), "{e}");
     }
 }

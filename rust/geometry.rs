@@ -22,27 +22,54 @@ pub struct Spread {
 /// millionth of the largest one).
 pub const FLAT_RATIO: f64 = 1e-12;
 
-/// Computes the [`Spread`] of `points` in two streaming passes (no copy of the data).
+/// Computes the [`Spread`] of `points` in one streaming pass (sums of the points shifted by the
+/// first one, so that large offsets do not cancel).
 pub fn spread(points: &[[f64; 3]]) -> Spread {
     let n = points.len().max(1) as f64;
-    let mut mean = Vector3::zeros();
+    let p0 = points.first().copied().unwrap_or([0.0; 3]);
+    let mut s1 = [0.0f64; 3];
+    let mut s2 = [0.0f64; 6]; // xx yy zz xy xz yz
     for p in points {
-        mean += Vector3::new(p[0], p[1], p[2]);
+        let d = [p[0] - p0[0], p[1] - p0[1], p[2] - p0[2]];
+        for k in 0..3 {
+            s1[k] += d[k];
+        }
+        s2[0] += d[0] * d[0];
+        s2[1] += d[1] * d[1];
+        s2[2] += d[2] * d[2];
+        s2[3] += d[0] * d[1];
+        s2[4] += d[0] * d[2];
+        s2[5] += d[1] * d[2];
     }
-    mean /= n;
-    let mut cov = Matrix3::zeros();
-    for p in points {
-        let d = Vector3::new(p[0], p[1], p[2]) - mean;
-        cov += d * d.transpose();
-    }
-    cov /= n;
+    let m = [s1[0] / n, s1[1] / n, s1[2] / n];
+    let c = |i: usize, a: usize, b: usize| s2[i] / n - m[a] * m[b];
+    let cov = Matrix3::new(
+        c(0, 0, 0),
+        c(3, 0, 1),
+        c(4, 0, 2),
+        c(3, 0, 1),
+        c(1, 1, 1),
+        c(5, 1, 2),
+        c(4, 0, 2),
+        c(5, 1, 2),
+        c(2, 2, 2),
+    );
+    let mean = Vector3::new(p0[0] + m[0], p0[1] + m[1], p0[2] + m[2]);
     let scale = cov.trace().max(0.0).sqrt();
-    let mut variances: Vec<f64> = SymmetricEigen::new(cov).eigenvalues.iter().copied().collect();
+    let mut variances: Vec<f64> = SymmetricEigen::new(cov)
+        .eigenvalues
+        .iter()
+        .copied()
+        .collect();
     variances.sort_by(|a, b| b.total_cmp(a));
     Spread {
         mean,
         scale,
-        variances: [variances[0], variances[1].max(0.0), variances[2].max(0.0)],
+        variances: [
+            variances[0].max(0.0),
+            variances[1].max(0.0),
+            variances[2].max(0.0),
+        ],
     }
 }
 
@@ -55,7 +82,10 @@ pub fn check_three_dimensional(points: &[[f64; 3]], what: &str) -> Result<Spread
     let [l1, l2, l3] = s.variances;
     if !(l1 > 0.0) || s.scale == 0.0 {
         return Err(CalError::Degenerate {
-            why: format!("all {} points are identical, so the {what} is undetermined", points.len()),
+            why: format!(
+                "all {} points are identical, so the {what} is undetermined",
+                points.len()
+            ),
             fix: "the sensor did not move or the readings are stuck: check the wiring, then turn \
                   the sensor through many orientations"
                 .into(),
@@ -87,13 +117,20 @@ mod tests {
     #[test]
     fn detects_line_and_plane() {
         let line: Vec<[f64; 3]> = (0..10).map(|i| [i as f64, 2.0 * i as f64, 0.5]).collect();
-        assert!(matches!(check_three_dimensional(&line, "sphere"), Err(CalError::Degenerate { .. })));
-        let plane: Vec<[f64; 3]> =
-            (0..50).map(|i| [(i as f64).cos(), (i as f64).sin(), 3.0]).collect();
+        assert!(matches!(
+            check_three_dimensional(&line, "sphere"),
+            Err(CalError::Degenerate { .. })
+        ));
+        let plane: Vec<[f64; 3]> = (0..50)
+            .map(|i| [(i as f64).cos(), (i as f64).sin(), 3.0])
+            .collect();
         let e = check_three_dimensional(&plane, "sphere").unwrap_err();
         assert!(e.to_string().contains("plane"), "{e}");
         let same = vec![[1.0, 2.0, 3.0]; 7];
-        assert!(check_three_dimensional(&same, "sphere").unwrap_err().to_string().contains("identical"));
+        assert!(check_three_dimensional(&same, "sphere")
+            .unwrap_err()
+            .to_string()
+            .contains("identical"));
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub mod bounds;
 pub mod ellipsoid;
 pub mod error;
 pub mod geometry;
+mod simd;
 pub mod sphere;
 
 #[cfg(feature = "python")]

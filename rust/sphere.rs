@@ -53,7 +53,13 @@ pub struct DescentOptions {
 impl Default for DescentOptions {
     /// The seed's values: start at the origin, step 1000, divide by 10 down to 0.01.
     fn default() -> Self {
-        DescentOptions { start: [0.0; 3], step: 1000.0, min_step: 0.01, shrink: 10.0, max_iter: 1_000_000 }
+        DescentOptions {
+            start: [0.0; 3],
+            step: 1000.0,
+            min_step: 0.01,
+            shrink: 10.0,
+            max_iter: 1_000_000,
+        }
     }
 }
 
@@ -135,7 +141,10 @@ struct NeighbourSums {
 
 impl NeighbourSums {
     fn zero() -> Self {
-        NeighbourSums { direct: [0.0; 26], m: [0.0; 5] }
+        NeighbourSums {
+            direct: [0.0; 26],
+            m: [0.0; 5],
+        }
     }
     fn add(mut self, o: Self) -> Self {
         for t in 0..26 {
@@ -181,10 +190,23 @@ fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26
                 acc.m[3] -= cc;
                 acc.m[4] -= 1.0;
             } else {
-                for (t, d) in NEIGHBOURS.iter().enumerate() {
-                    let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
-                    let e = s - (i * a + j * b + k * cc) + h2 * (i * i + j * j + k * k);
-                    acc.direct[t] += e.abs();
+                // e(i, j, k) = A_i + B_j + C_k with A_i = s - i a + h² i², B_j = -j b + h² j²,
+                // C_k = -k c + h² k², for i, j, k in -1, 0, 1 (NEIGHBOURS' order, centre skipped)
+                let aa = [s + a + h2, s, s - a + h2];
+                let bb = [b + h2, 0.0, -b + h2];
+                let ck = [cc + h2, 0.0, -cc + h2];
+                let mut t = 0;
+                for (ii, ai) in aa.iter().enumerate() {
+                    for (jj, bj) in bb.iter().enumerate() {
+                        let ab = ai + bj;
+                        for (kk, ckk) in ck.iter().enumerate() {
+                            if ii == 1 && jj == 1 && kk == 1 {
+                                continue;
+                            }
+                            acc.direct[t] += (ab + ckk).abs();
+                            t += 1;
+                        }
+                    }
                 }
             }
         }
@@ -193,7 +215,10 @@ fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26
     let sums = if points.len() < 2 * CHUNK {
         part(points)
     } else {
-        points.par_chunks(CHUNK).map(part).reduce(NeighbourSums::zero, NeighbourSums::add)
+        points
+            .par_chunks(CHUNK)
+            .map(part)
+            .reduce(NeighbourSums::zero, NeighbourSums::add)
     };
     sums.totals(h2)
 }
@@ -228,7 +253,11 @@ pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) ->
         return Err(CalError::InvalidArgument("start must be finite".into()));
     }
     if points.len() < 4 {
-        return Err(CalError::TooFewPoints { got: points.len(), need: 4, what: "the centre search" });
+        return Err(CalError::TooFewPoints {
+            got: points.len(),
+            need: 4,
+            what: "the centre search",
+        });
     }
     check_three_dimensional(points, "centre")?;
     let r2 = radius * radius;
@@ -242,10 +271,16 @@ pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) ->
         iterations += 1;
         let sums = neighbour_sums(points, c, r2, step);
         evaluations += 26;
-        let (best, best_err) = sums
-            .iter()
-            .enumerate()
-            .fold((usize::MAX, f64::INFINITY), |(bi, be), (i, &e)| if e < be { (i, e) } else { (bi, be) });
+        let (best, best_err) =
+            sums.iter()
+                .enumerate()
+                .fold((usize::MAX, f64::INFINITY), |(bi, be), (i, &e)| {
+                    if e < be {
+                        (i, e)
+                    } else {
+                        (bi, be)
+                    }
+                });
         if best_err < err {
             let d = NEIGHBOURS[best];
             for k in 0..3 {
@@ -259,7 +294,14 @@ pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) ->
     }
     // report the exact sum at the final centre (the neighbour sums add in another order)
     let error = error_sum(points, c, r2);
-    Ok(Descent { center: c, error, iterations, evaluations: evaluations + 1, step, converged })
+    Ok(Descent {
+        center: c,
+        error,
+        iterations,
+        evaluations: evaluations + 1,
+        step,
+        converged,
+    })
 }
 
 /// Largest number of grid nodes times points that [`grid_center`] accepts.
@@ -279,7 +321,11 @@ pub fn grid_center(
     check_positive("radius", radius)?;
     check_positive("step", step)?;
     if points.is_empty() {
-        return Err(CalError::TooFewPoints { got: 0, need: 1, what: "the cube search" });
+        return Err(CalError::TooFewPoints {
+            got: 0,
+            need: 1,
+            what: "the cube search",
+        });
     }
     let mut counts = [0usize; 3];
     for k in 0..3 {
@@ -311,7 +357,11 @@ pub fn grid_center(
         let i = idx / (counts[1] * counts[2]);
         let j = (idx / counts[2]) % counts[1];
         let k = idx % counts[2];
-        [lo[0] + step * i as f64, lo[1] + step * j as f64, lo[2] + step * k as f64]
+        [
+            lo[0] + step * i as f64,
+            lo[1] + step * j as f64,
+            lo[2] + step * k as f64,
+        ]
     };
     let eval = |idx: usize| -> (f64, usize) {
         let c = node(idx);
@@ -324,9 +374,25 @@ pub fn grid_center(
             .sum();
         (e, idx)
     };
-    let better = |a: (f64, usize), b: (f64, usize)| if b.0 < a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a };
-    let (error, best) = (0..total).into_par_iter().map(eval).reduce(|| (f64::INFINITY, usize::MAX), better);
-    Ok(Descent { center: node(best), error, iterations: total, evaluations: total, step, converged: true })
+    let better = |a: (f64, usize), b: (f64, usize)| {
+        if b.0 < a.0 || (b.0 == a.0 && b.1 < a.1) {
+            b
+        } else {
+            a
+        }
+    };
+    let (error, best) = (0..total)
+        .into_par_iter()
+        .map(eval)
+        .reduce(|| (f64::INFINITY, usize::MAX), better);
+    Ok(Descent {
+        center: node(best),
+        error,
+        iterations: total,
+        evaluations: total,
+        step,
+        converged: true,
+    })
 }
 
 /// The result of a linear least-squares sphere fit.
@@ -348,7 +414,11 @@ pub struct LinearSphere {
 pub fn fit_sphere_linear(points: &[[f64; 3]]) -> Result<LinearSphere> {
     check_finite(points)?;
     if points.len() < 4 {
-        return Err(CalError::TooFewPoints { got: points.len(), need: 4, what: "a sphere fit" });
+        return Err(CalError::TooFewPoints {
+            got: points.len(),
+            need: 4,
+            what: "a sphere fit",
+        });
     }
     let sp = check_three_dimensional(points, "sphere")?;
     let (m, s) = (sp.mean, sp.scale);
@@ -361,10 +431,13 @@ pub fn fit_sphere_linear(points: &[[f64; 3]]) -> Result<LinearSphere> {
         ata += row * row.transpose();
         atb += row * rhs;
     }
-    let sol = ata.cholesky().map(|ch| ch.solve(&atb)).ok_or_else(|| CalError::Degenerate {
-        why: "the points do not determine a sphere".into(),
-        fix: "turn the sensor through more orientations".into(),
-    })?;
+    let sol = ata
+        .cholesky()
+        .map(|ch| ch.solve(&atb))
+        .ok_or_else(|| CalError::Degenerate {
+            why: "the points do not determine a sphere".into(),
+            fix: "turn the sensor through more orientations".into(),
+        })?;
     let c = Vector3::new(sol[0], sol[1], sol[2]);
     let r2 = sol[3] + c.norm_squared();
     if !(r2 > 0.0) || !r2.is_finite() {
@@ -382,7 +455,11 @@ pub fn fit_sphere_linear(points: &[[f64; 3]]) -> Result<LinearSphere> {
             d * d
         })
         .sum();
-    Ok(LinearSphere { center: [center.x, center.y, center.z], radius, rms: (ss / points.len() as f64).sqrt() })
+    Ok(LinearSphere {
+        center: [center.x, center.y, center.z],
+        radius,
+        rms: (ss / points.len() as f64).sqrt(),
+    })
 }
 
 #[cfg(test)]
@@ -397,7 +474,11 @@ mod tests {
                 let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
                 let rr = (1.0 - z * z).sqrt();
                 let t = golden * i as f64;
-                [c[0] + r * rr * t.cos(), c[1] + r * rr * t.sin(), c[2] + r * z]
+                [
+                    c[0] + r * rr * t.cos(),
+                    c[1] + r * rr * t.sin(),
+                    c[2] + r * z,
+                ]
             })
             .collect()
     }
@@ -405,7 +486,11 @@ mod tests {
     fn brute_neighbours(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26] {
         let mut out = [0.0; 26];
         for (t, d) in NEIGHBOURS.iter().enumerate() {
-            let cc = [c[0] + h * d[0] as f64, c[1] + h * d[1] as f64, c[2] + h * d[2] as f64];
+            let cc = [
+                c[0] + h * d[0] as f64,
+                c[1] + h * d[1] as f64,
+                c[2] + h * d[2] as f64,
+            ];
             out[t] = error_sum(points, cc, r2);
         }
         out
@@ -414,11 +499,20 @@ mod tests {
     #[test]
     fn neighbour_sums_match_direct_evaluation() {
         let pts = sphere_points([100.0, -50.0, 20.0], 1000.0, 20_000);
-        for (c, h) in [([0.0, 0.0, 0.0], 1000.0), ([90.0, -45.0, 25.0], 10.0), ([100.0, -50.0, 20.0], 0.01)] {
+        for (c, h) in [
+            ([0.0, 0.0, 0.0], 1000.0),
+            ([90.0, -45.0, 25.0], 10.0),
+            ([100.0, -50.0, 20.0], 0.01),
+        ] {
             let fast = neighbour_sums(&pts, c, 1e6, h);
             let slow = brute_neighbours(&pts, c, 1e6, h);
             for t in 0..26 {
-                assert!((fast[t] - slow[t]).abs() <= 1e-9 * slow[t].max(1.0), "{t}: {} vs {}", fast[t], slow[t]);
+                assert!(
+                    (fast[t] - slow[t]).abs() <= 1e-9 * slow[t].max(1.0),
+                    "{t}: {} vs {}",
+                    fast[t],
+                    slow[t]
+                );
             }
         }
     }
@@ -428,7 +522,11 @@ mod tests {
         let pts = sphere_points([123.4, -56.7, 8.9], 16384.0, 500);
         let d = descend_center(&pts, 16384.0, DescentOptions::default()).unwrap();
         for k in 0..3 {
-            assert!((d.center[k] - [123.4, -56.7, 8.9][k]).abs() < 0.02, "{:?}", d.center);
+            assert!(
+                (d.center[k] - [123.4, -56.7, 8.9][k]).abs() < 0.02,
+                "{:?}",
+                d.center
+            );
         }
         assert!(d.converged && d.step < 0.01);
     }
@@ -444,7 +542,10 @@ mod tests {
     #[test]
     fn grid_refuses_huge_work() {
         let pts = sphere_points([0.0; 3], 1.0, 1000);
-        assert!(matches!(grid_center(&pts, 1.0, [-1e4; 3], [1e4; 3], 0.01), Err(CalError::InvalidArgument(_))));
+        assert!(matches!(
+            grid_center(&pts, 1.0, [-1e4; 3], [1e4; 3], 0.01),
+            Err(CalError::InvalidArgument(_))
+        ));
     }
 
     #[test]
@@ -459,11 +560,26 @@ mod tests {
     fn bad_input_is_an_error_not_a_panic() {
         let mut pts = sphere_points([0.0; 3], 1.0, 10);
         pts[3][1] = f64::NAN;
-        assert_eq!(fit_sphere_linear(&pts), Err(CalError::NonFinite { index: 3 }));
-        assert!(matches!(fit_sphere_linear(&pts[..2]), Err(CalError::NonFinite { .. }) | Err(CalError::TooFewPoints { .. })));
+        assert_eq!(
+            fit_sphere_linear(&pts),
+            Err(CalError::NonFinite { index: 3 })
+        );
+        assert!(matches!(
+            fit_sphere_linear(&pts[..2]),
+            Err(CalError::NonFinite { .. }) | Err(CalError::TooFewPoints { .. })
+        ));
         let ok = sphere_points([0.0; 3], 1.0, 10);
-        assert!(matches!(descend_center(&ok, -1.0, DescentOptions::default()), Err(CalError::InvalidArgument(_))));
-        let o = DescentOptions { shrink: 1.0, ..Default::default() };
-        assert!(matches!(descend_center(&ok, 1.0, o), Err(CalError::InvalidArgument(_))));
+        assert!(matches!(
+            descend_center(&ok, -1.0, DescentOptions::default()),
+            Err(CalError::InvalidArgument(_))
+        ));
+        let o = DescentOptions {
+            shrink: 1.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            descend_center(&ok, 1.0, o),
+            Err(CalError::InvalidArgument(_))
+        ));
     }
 }

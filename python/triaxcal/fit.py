@@ -10,8 +10,9 @@ soft-iron terms (``offdiag``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -20,11 +21,11 @@ from ._validate import as_points, as_radius, as_vector
 from .errors import CalibrationError
 
 __all__ = [
+    "MODELS",
     "BatchFit",
     "Descent",
     "EllipsoidFit",
     "LinearSphere",
-    "MODELS",
     "descend_center",
     "fit_batch",
     "fit_ellipsoid",
@@ -144,7 +145,7 @@ def fit_ellipsoid(
     model: str = "full",
     radius: float | None = None,
     max_iter: int = 100,
-    tol: float = 1e-12,
+    tol: float = 1e-10,
     method: str = "lm",
     debias: bool = True,
 ) -> EllipsoidFit:
@@ -173,8 +174,9 @@ def fit_ellipsoid(
     debias : bool
         Correct the residual for the length that noise adds to every vector (first order in
         the noise variance, which is estimated from the residuals). Removes the O(sigma^2)
-        shrinkage of ``matrix`` that every length-based fit has; ``False`` gives the plain
-        geometric least-squares fit.
+        shrinkage of ``matrix`` that every length-based fit has; applied only where that bias
+        exceeds a tenth of the statistical error (noise above 0.1/sqrt(N) of the radius).
+        ``False`` gives the plain geometric least-squares fit.
 
     Returns
     -------
@@ -218,7 +220,7 @@ def fit_sphere(
     *,
     radius: float | None = None,
     max_iter: int = 100,
-    tol: float = 1e-12,
+    tol: float = 1e-10,
     debias: bool = True,
 ) -> EllipsoidFit:
     """Geometric sphere fit: offset and one scale (``fit_ellipsoid(model="sphere")``).
@@ -282,7 +284,7 @@ def fit_batch(
     model: str = "full",
     radius: float | None = None,
     max_iter: int = 100,
-    tol: float = 1e-12,
+    tol: float = 1e-10,
     method: str = "lm",
     debias: bool = True,
 ) -> BatchFit:

@@ -9,7 +9,9 @@ use crate::ellipsoid::{self, EllipsoidFit, FitOptions, Method, Model};
 use crate::error::CalError;
 use crate::sphere::{self, Descent, DescentOptions};
 use errors::{py_result, CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError};
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -22,9 +24,9 @@ fn points<'a>(arr: &'a PyReadonlyArray2<'_, f64>) -> PyResult<&'a [[f64; 3]]> {
             shape[1]
         )));
     }
-    let flat = arr
-        .as_slice()
-        .map_err(|_| CalibrationError::new_err("points must be C-contiguous (np.ascontiguousarray)"))?;
+    let flat = arr.as_slice().map_err(|_| {
+        CalibrationError::new_err("points must be C-contiguous (np.ascontiguousarray)")
+    })?;
     let (chunks, _) = flat.as_chunks::<3>();
     Ok(chunks)
 }
@@ -44,7 +46,10 @@ fn fit_dict<'py>(py: Python<'py>, f: EllipsoidFit) -> PyResult<Bound<'py, PyDict
     let out = PyDict::new(py);
     out.set_item("model", f.model.name())?;
     out.set_item("offset", f.offset.to_vec())?;
-    out.set_item("matrix", f.matrix.iter().map(|r| r.to_vec()).collect::<Vec<_>>())?;
+    out.set_item(
+        "matrix",
+        f.matrix.iter().map(|r| r.to_vec()).collect::<Vec<_>>(),
+    )?;
     out.set_item("radius", f.radius)?;
     out.set_item("rms", f.rms)?;
     out.set_item("stderr", f.stderr)?;
@@ -78,7 +83,12 @@ fn options(
 
 /// Σ |‖p − center‖² − radius²| over the points.
 #[pyfunction]
-fn sphere_error(py: Python<'_>, points: PyReadonlyArray2<'_, f64>, center: [f64; 3], radius: f64) -> PyResult<f64> {
+fn sphere_error(
+    py: Python<'_>,
+    points: PyReadonlyArray2<'_, f64>,
+    center: [f64; 3],
+    radius: f64,
+) -> PyResult<f64> {
     let pts = self::points(&points)?;
     py_result(py.detach(|| sphere::sphere_error(pts, center, radius)))
 }
@@ -97,7 +107,13 @@ fn descend_center<'py>(
     max_iter: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
     let pts = self::points(&points)?;
-    let opts = DescentOptions { start, step, min_step, shrink, max_iter };
+    let opts = DescentOptions {
+        start,
+        step,
+        min_step,
+        shrink,
+        max_iter,
+    };
     let d = py_result(py.detach(|| sphere::descend_center(pts, radius, opts)))?;
     descent_dict(py, d)
 }
@@ -120,7 +136,10 @@ fn grid_center<'py>(
 
 /// Linear least-squares sphere fit: (center, radius, rms).
 #[pyfunction]
-fn fit_sphere_linear(py: Python<'_>, points: PyReadonlyArray2<'_, f64>) -> PyResult<([f64; 3], f64, f64)> {
+fn fit_sphere_linear(
+    py: Python<'_>,
+    points: PyReadonlyArray2<'_, f64>,
+) -> PyResult<([f64; 3], f64, f64)> {
     let pts = self::points(&points)?;
     let f = py_result(py.detach(|| sphere::fit_sphere_linear(pts)))?;
     Ok((f.center, f.radius, f.rms))
@@ -161,7 +180,9 @@ fn fit_batch<'py>(
     debias: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let pts = self::points(&points)?;
-    let b = bounds.as_slice().map_err(|_| CalibrationError::new_err("bounds must be contiguous"))?;
+    let b = bounds
+        .as_slice()
+        .map_err(|_| CalibrationError::new_err("bounds must be contiguous"))?;
     let opts = options(model, radius, max_iter, tol, method, debias)?;
     let mut sets = Vec::with_capacity(b.len().saturating_sub(1));
     for w in b.windows(2) {
@@ -206,7 +227,10 @@ fn fit_batch<'py>(
     }
     let out = PyDict::new(py);
     out.set_item("offsets", PyArray1::from_vec(py, offsets).reshape([nb, 3])?)?;
-    out.set_item("matrices", PyArray1::from_vec(py, matrices).reshape([nb, 3, 3])?)?;
+    out.set_item(
+        "matrices",
+        PyArray1::from_vec(py, matrices).reshape([nb, 3, 3])?,
+    )?;
     out.set_item("radii", PyArray1::from_vec(py, radii))?;
     out.set_item("rms", PyArray1::from_vec(py, rms))?;
     out.set_item("converged", PyArray1::from_vec(py, converged))?;
