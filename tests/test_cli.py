@@ -314,3 +314,11 @@ def test_send_to_simulated_device(cal_file, capsys):
         assert main(["send", str(cal_file), "--port", dev.port, "--timeout", "3"]) == 0
         assert dev.motioncal is not None
     assert "confirmed" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["fit", "export", "report", "send"])
+def test_help_renders(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    assert f"triaxcal {command}" in capsys.readouterr().out
