@@ -150,3 +150,11 @@ def test_turntable_rejects_unusable_input(realdata):
         tc.fit_turntable([g33[:1500]], [RPM33], offset=np.zeros(3))
     with pytest.raises(tc.CalibrationError, match="one rate per recording"):
         tc.fit_turntable([g33], [], offset=np.zeros(3))
+
+
+def test_docstrings_run():
+    import doctest
+
+    import triaxcal.gyro as mod
+
+    assert doctest.testmod(mod, raise_on_error=True).attempted > 0

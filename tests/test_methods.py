@@ -162,3 +162,11 @@ def test_six_position_agrees_with_ferraris_on_real_faces(realdata):
     np.testing.assert_allclose(six.counts_per_g, fer.accel_counts_per_g, rtol=0.005)
     # offsets: per-axis midpoints vs the mean of all six faces, within 10 counts (5 mg)
     np.testing.assert_allclose(six.offset, fer.accel.offset, atol=10)
+
+
+def test_docstrings_run():
+    import doctest
+
+    import triaxcal.methods as mod
+
+    assert doctest.testmod(mod, raise_on_error=True).attempted > 0

@@ -128,3 +128,11 @@ def test_sunsided_gyro_offset_against_its_temperature_channel(realdata):
         mode = np.round(t0, 6) == vals[np.argmax(counts)]
     with pytest.raises(tc.CalibrationError, match="temperature range of 0 degC"):
         tc.fit_temperature(data[0][0][mode], t0[mode])
+
+
+def test_docstrings_run():
+    import doctest
+
+    import triaxcal.temperature as mod
+
+    assert doctest.testmod(mod, raise_on_error=True).attempted > 0

@@ -88,6 +88,14 @@ def integrate_rate(rate: Any, t: Any) -> np.ndarray:
 
     Returns an (N, 3) array starting at zero, in rate units times seconds (counts * s for raw
     readings, deg for deg/s). ``out[b] - out[a]`` is the integral from sample a to sample b.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.linspace(0.0, 1.0, 101)
+    >>> rate = np.column_stack([np.full(101, 90.0), np.zeros(101), 180 * t])  # deg/s
+    >>> integrate_rate(rate, t)[-1].round(6).tolist()
+    [90.0, 0.0, 90.0]
     """
     r = np.asarray(rate, dtype=np.float64)
     tt = np.asarray(t, dtype=np.float64)

@@ -120,6 +120,16 @@ def tilt_rig(
     Returns
     -------
     TiltRig
+
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> s, c = np.sin(np.radians(10)), np.cos(np.radians(10))
+    >>> rig = tc.tilt_rig({"fore_down": [-s + 0.01, 0.02, c], "aft_down": [s + 0.01, 0.02, c],
+    ...                    "left_down": [0.01, -s + 0.02, c], "right_down": [0.01, s + 0.02, c]},
+    ...                   angle_deg=10)
+    >>> rig.offset.round(6).tolist(), rig.gain.round(6).tolist()
+    ([0.01, 0.02, 0.0], [1.0, 1.0, 1.0])
     """
     ang = float(angle_deg)
     if not (np.isfinite(ang) and 0 < ang < 90):
@@ -212,6 +222,15 @@ def six_position(points: Any, *, gravity: float = 1.0) -> SixPosition:
     ------
     CalibrationError
         If a face is missing: the message names it (e.g. "-y (y axis pointing down)").
+
+    Examples
+    --------
+    >>> import triaxcal as tc
+    >>> faces = [[16500, 10, 0], [-16300, 10, 0], [100, 16484, 0], [100, -16284, 0],
+    ...          [100, 10, 16600], [100, 10, -16000]]
+    >>> six = tc.six_position(faces)
+    >>> six.offset.tolist(), six.counts_per_g.tolist()
+    ([100.0, 100.0, 300.0], [16400.0, 16384.0, 16300.0])
     """
     p = _readings(points, "points")
     grav = float(gravity)

@@ -164,6 +164,16 @@ def fit_temperature(
     -------
     TemperatureModel
 
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> temp = np.linspace(20.0, 40.0, 200)
+    >>> gyro_at_rest = np.column_stack([50 + 2.0 * (temp - 20), -30 - 1.5 * (temp - 20),
+    ...                                 10 + 0.0 * temp])
+    >>> m = tc.fit_temperature(gyro_at_rest, temp)        # reference: 20 degC, the first reading
+    >>> m.offset_coef.round(6).tolist()                   # counts, counts per degC
+    [[50.0, -30.0, 10.0], [2.0, -1.5, 0.0]]
+
     Raises
     ------
     CalibrationError
