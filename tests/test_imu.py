@@ -67,9 +67,10 @@ def test_gravity_prediction_helper():
     np.testing.assert_allclose(g1, [0, 1, 0], atol=1e-9)
 
 
-def test_imutk_xsens_matches_the_factory_calibration(realdata):
+@pytest.mark.parametrize("rest_s", [3.0, 45.0])  # the default and imu_tk's long initial rest
+def test_imutk_xsens_matches_the_factory_calibration(realdata, rest_s):
     t, acc, gyr = load_imutk_xsens(realdata)
-    res = tc.calibrate_imu(acc, gyr, rate_hz=100, gravity=IMUTK_GRAVITY, t=t, rest_s=45.0)
+    res = tc.calibrate_imu(acc, gyr, rate_hz=100, gravity=IMUTK_GRAVITY, t=t, rest_s=rest_s)
     assert res.accel_model == "full" and 35 <= len(res.intervals) <= 42
     assert res.intervals[0][0] == 0 and res.intervals[0][1] > 4500  # the initial 50 s rest
     # within a few tenths of a percent of the maker's gains (given to 3-4 digits)
@@ -86,7 +87,7 @@ def test_imutk_xsens_matches_the_factory_calibration(realdata):
 
 def test_imucal_ferraris_session_agrees_with_the_closed_form(realdata):
     acc, gyr, sec = load_ferraris_session(realdata)
-    imu = tc.calibrate_imu(acc, gyr, rate_hz=102.4, gravity=9.81, rest_s=2.0, min_poses=6)
+    imu = tc.calibrate_imu(acc, gyr, rate_hz=102.4, gravity=9.81)
     # only the six faces (with repeats): the full accelerometer model is not determined
     assert imu.accel_model == "axis"
     fer = tc.ferraris({k: (acc[a:b], gyr[a:b]) for k, (a, b) in sec.items()}, rate_hz=102.4,
