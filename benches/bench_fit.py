@@ -10,13 +10,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import subprocess
 import sys
 import time
 
 import numpy as np
-
 import triaxcal as tc
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
@@ -27,6 +25,7 @@ TRUE_MATRIX = np.array([[1.04, 0.01, -0.01], [0.01, 0.97, 0.015], [-0.01, 0.015,
 
 
 # ------------------------------------------------------------------------------- baselines
+
 
 def numpy_algebraic(p: np.ndarray, radius: float = 1.0):
     """The common numpy ellipsoid fit: SVD of the 10-column design matrix, no refinement."""
@@ -51,7 +50,9 @@ def scipy_geometric(p: np.ndarray, radius: float = 1.0, jac: str = "2-point"):
     from scipy.optimize import least_squares
 
     def unpack(th):
-        return th[:3], np.array([[th[3], th[6], th[7]], [th[6], th[4], th[8]], [th[7], th[8], th[5]]])
+        return th[:3], np.array(
+            [[th[3], th[6], th[7]], [th[6], th[4], th[8]], [th[7], th[8], th[5]]]
+        )
 
     def resid(th):
         o, w = unpack(th)
@@ -79,7 +80,13 @@ def scipy_geometric(p: np.ndarray, radius: float = 1.0, jac: str = "2-point"):
 
 
 NEIGHBOURS = np.array(
-    [(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)],
+    [
+        (i, j, k)
+        for i in (-1, 0, 1)
+        for j in (-1, 0, 1)
+        for k in (-1, 0, 1)
+        if (i, j, k) != (0, 0, 0)
+    ],
     dtype=float,
 )
 
@@ -102,6 +109,7 @@ def numpy_descend(p, radius, start=(0.0, 0.0, 0.0), step=1000.0, min_step=0.01, 
 
 
 # ------------------------------------------------------------------------------- timing
+
 
 def best_of(fn, rounds):
     best = np.inf
@@ -126,7 +134,9 @@ def side_by_side(base, ours, rounds):
 
 
 def err(offset, matrix, scale=16384.0):
-    return np.linalg.norm(np.asarray(offset) - TRUE_OFFSET), np.linalg.norm(np.asarray(matrix) - TRUE_MATRIX) * scale
+    return np.linalg.norm(np.asarray(offset) - TRUE_OFFSET), np.linalg.norm(
+        np.asarray(matrix) - TRUE_MATRIX
+    ) * scale
 
 
 ROWS = []
@@ -135,7 +145,11 @@ ROWS = []
 def report(name, target, tb, to, extra=""):
     ratio = tb / to
     ROWS.append((name, target, ratio, tb, to, extra))
-    print(f"{name:<48} {tb * 1e3:10.1f} ms {to * 1e3:10.2f} ms  {ratio:7.1f}x (target {target}x) {extra}", flush=True)
+    print(
+        f"{name:<48} {tb * 1e3:10.1f} ms {to * 1e3:10.2f} ms  {ratio:7.1f}x "
+        f"(target {target}x) {extra}",
+        flush=True,
+    )
 
 
 def memory_probe(n: int) -> str:
@@ -153,7 +167,10 @@ print((after - before) * 1024, p.nbytes)
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     extra, nbytes = (int(v) for v in out.stdout.split())
-    return f"fit of {n:,} points: peak RSS +{extra / 2**20:.1f} MiB for {nbytes / 2**20:.0f} MiB of input"
+    return (
+        f"fit of {n:,} points: peak RSS +{extra / 2**20:.1f} MiB "
+        f"for {nbytes / 2**20:.0f} MiB of input"
+    )
 
 
 def main() -> None:
@@ -168,39 +185,74 @@ def main() -> None:
     # 1. N = 1e6, full model, vs the numpy algebraic fit
     n = 200_000 if q else 1_000_000
     raw, _ = distorted_sphere(n, offset=TRUE_OFFSET, matrix=TRUE_MATRIX, noise=0.01, seed=1)
-    tb, to, rb, ro = side_by_side(lambda: numpy_algebraic(raw), lambda: tc.fit_ellipsoid(raw, radius=1.0), rounds)
+    tb, to, rb, ro = side_by_side(
+        lambda: numpy_algebraic(raw), lambda: tc.fit_ellipsoid(raw, radius=1.0), rounds
+    )
     eb, eo = err(*rb), err(ro.offset, ro.matrix)
-    report(f"full fit, N={n:,} vs numpy algebraic (SVD)", 3, tb, to,
-           f"| offset err {eb[0]:.3f} vs {eo[0]:.3f} counts, matrix err {eb[1]:.2e} vs {eo[1]:.2e}")
+    report(
+        f"full fit, N={n:,} vs numpy algebraic (SVD)",
+        3,
+        tb,
+        to,
+        f"| offset err {eb[0]:.3f} vs {eo[0]:.3f} counts, matrix err {eb[1]:.2e} vs {eo[1]:.2e}",
+    )
 
     # 2. N = 1e5, full model, vs scipy least_squares lm
     n = 20_000 if q else 100_000
     raw, _ = distorted_sphere(n, offset=TRUE_OFFSET, matrix=TRUE_MATRIX, noise=0.01, seed=2)
     for jac in ("2-point", "analytic"):
-        tb, to, rb, ro = side_by_side(lambda: scipy_geometric(raw, jac=jac),
-                                      lambda: tc.fit_ellipsoid(raw, radius=1.0), 1 if not q else 1)
+        tb, to, rb, ro = side_by_side(
+            lambda jac=jac: scipy_geometric(raw, jac=jac),
+            lambda: tc.fit_ellipsoid(raw, radius=1.0),
+            1,
+        )
         eb, eo = err(*rb), err(ro.offset, ro.matrix)
-        report(f"full fit, N={n:,} vs scipy lm ({jac} jacobian)", 30, tb, to,
-               f"| offset err {eb[0]:.3f} vs {eo[0]:.3f}, matrix err {eb[1]:.2e} vs {eo[1]:.2e}")
+        report(
+            f"full fit, N={n:,} vs scipy lm ({jac} jacobian)",
+            30,
+            tb,
+            to,
+            f"| offset err {eb[0]:.3f} vs {eo[0]:.3f}, matrix err {eb[1]:.2e} vs {eo[1]:.2e}",
+        )
 
     # 3. batch of 10,000 sets x 200 points vs a Python loop of the numpy algebraic fit
     b = 2_000 if q else 10_000
-    sets = np.stack([distorted_sphere(200, offset=TRUE_OFFSET, matrix=TRUE_MATRIX, noise=0.003,
-                                      seed=100 + i)[0] for i in range(b)])
-    tb, to, rb, ro = side_by_side(lambda: [numpy_algebraic(s) for s in sets],
-                                  lambda: tc.fit_batch(sets, radius=1.0), rounds)
+    sets = np.stack(
+        [
+            distorted_sphere(
+                200, offset=TRUE_OFFSET, matrix=TRUE_MATRIX, noise=0.003, seed=100 + i
+            )[0]
+            for i in range(b)
+        ]
+    )
+    tb, to, rb, ro = side_by_side(
+        lambda: [numpy_algebraic(s) for s in sets], lambda: tc.fit_batch(sets, radius=1.0), rounds
+    )
     eb = np.median([err(*r)[1] for r in rb])
     eo = np.median([err(o, m)[1] for o, m in zip(ro.offsets, ro.matrices)])
-    report(f"fit_batch, {b:,} sets x 200 points vs numpy loop", 10, tb, to,
-           f"| median matrix err {eb:.2e} vs {eo:.2e}")
+    report(
+        f"fit_batch, {b:,} sets x 200 points vs numpy loop",
+        10,
+        tb,
+        to,
+        f"| median matrix err {eb:.2e} vs {eo:.2e}",
+    )
 
     # 4. descend_center, 10,000 points, vs the same search in numpy
-    raw, _ = distorted_sphere(10_000, offset=TRUE_OFFSET, matrix=np.eye(3) / 16384, noise=0.002, seed=3)
-    tb, to, rb, ro = side_by_side(lambda: numpy_descend(raw, 16384.0),
-                                  lambda: tc.descend_center(raw, 16384.0), rounds)
+    raw, _ = distorted_sphere(
+        10_000, offset=TRUE_OFFSET, matrix=np.eye(3) / 16384, noise=0.002, seed=3
+    )
+    tb, to, rb, ro = side_by_side(
+        lambda: numpy_descend(raw, 16384.0), lambda: tc.descend_center(raw, 16384.0), rounds
+    )
     same = np.max(np.abs(rb[0] - ro.center))
-    report("descend_center, N=10,000 vs numpy descent", 20, tb, to,
-           f"| centres differ by {same:.3g} counts")
+    report(
+        "descend_center, N=10,000 vs numpy descent",
+        20,
+        tb,
+        to,
+        f"| centres differ by {same:.3g} counts",
+    )
 
     if not q:
         print(memory_probe(2_000_000))

@@ -6,7 +6,6 @@ import threading
 
 import numpy as np
 import pytest
-
 import triaxcal as tc
 from _synth import distorted_sphere, random_sym
 
@@ -43,8 +42,9 @@ def test_int16_input_straight_from_a_sensor():
 
 @pytest.mark.parametrize("model,nstd", [("sphere", 4), ("axis", 6), ("full", 9)])
 def test_models_and_stderr_shapes(model, nstd):
-    raw, _ = distorted_sphere(500, offset=OFFSET, matrix=np.diag([1.03, 0.98, 1.0]) / 16384,
-                              noise=0.003, seed=2)
+    raw, _ = distorted_sphere(
+        500, offset=OFFSET, matrix=np.diag([1.03, 0.98, 1.0]) / 16384, noise=0.003, seed=2
+    )
     fit = tc.fit_ellipsoid(raw, model=model, radius=1.0)
     assert fit.stderr.shape == (nstd,) and len(fit.param_names) == nstd
     assert np.all(fit.stderr > 0) and np.all(np.isfinite(fit.stderr))
@@ -88,14 +88,19 @@ def test_full_fit_is_at_least_as_accurate_as_scipy_least_squares():
         raw, _ = distorted_sphere(3000, offset=off, matrix=m, noise=0.01, seed=trial)
         ours = tc.fit_ellipsoid(raw, radius=1.0, debias=False)  # the same residual as scipy's
 
-        def resid(th):
+        def resid(th, raw=raw):
             w = np.array([[th[3], th[6], th[7]], [th[6], th[4], th[8]], [th[7], th[8], th[5]]])
             return np.linalg.norm((raw - th[:3]) @ w.T, axis=1) - 1.0
 
         x0 = np.r_[raw.mean(0), np.full(3, 1 / np.std(raw) / np.sqrt(3)), np.zeros(3)]
         ref = scipy_opt.least_squares(resid, x0, method="lm", xtol=1e-15, ftol=1e-15)
-        w_ref = np.array([[ref.x[3], ref.x[6], ref.x[7]], [ref.x[6], ref.x[4], ref.x[8]],
-                          [ref.x[7], ref.x[8], ref.x[5]]])
+        w_ref = np.array(
+            [
+                [ref.x[3], ref.x[6], ref.x[7]],
+                [ref.x[6], ref.x[4], ref.x[8]],
+                [ref.x[7], ref.x[8], ref.x[5]],
+            ]
+        )
         err_ours = np.linalg.norm(ours.offset - off) + 1000 * np.linalg.norm(ours.matrix - m)
         err_ref = np.linalg.norm(ref.x[:3] - off) + 1000 * np.linalg.norm(np.abs(w_ref) - m)
         cost_ours = np.sum((np.linalg.norm(ours.apply(raw), axis=1) - 1) ** 2)
@@ -106,8 +111,13 @@ def test_full_fit_is_at_least_as_accurate_as_scipy_least_squares():
             raw, _ = distorted_sphere(100_000, offset=off, matrix=m, noise=0.03, seed=99)
             deb = tc.fit_ellipsoid(raw, radius=1.0)
             ref = scipy_opt.least_squares(resid, x0, method="lm")
-            w_ref = np.array([[ref.x[3], ref.x[6], ref.x[7]], [ref.x[6], ref.x[4], ref.x[8]],
-                              [ref.x[7], ref.x[8], ref.x[5]]])
+            w_ref = np.array(
+                [
+                    [ref.x[3], ref.x[6], ref.x[7]],
+                    [ref.x[6], ref.x[4], ref.x[8]],
+                    [ref.x[7], ref.x[8], ref.x[5]],
+                ]
+            )
             assert np.linalg.norm(deb.matrix - m) < 0.5 * np.linalg.norm(np.abs(w_ref) - m)
 
 
@@ -192,8 +202,9 @@ def test_partial_coverage_converges_with_large_stderr_and_says_so():
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     half = u[u[:, 2] > -0.2]
     full = tc.fit_ellipsoid(u + rng.normal(scale=0.01, size=u.shape), model="axis", radius=1.0)
-    part = tc.fit_ellipsoid(half + rng.normal(scale=0.01, size=half.shape), model="axis",
-                            radius=1.0)
+    part = tc.fit_ellipsoid(
+        half + rng.normal(scale=0.01, size=half.shape), model="axis", radius=1.0
+    )
     assert part.converged
     assert part.stderr[2] > 3 * full.stderr[2]  # the z offset is the poorly covered one
     assert any("-Z" in w for w in part.warnings), part.warnings  # says which side is empty
@@ -241,6 +252,7 @@ def test_non_contiguous_and_float32_inputs_give_the_same_fit():
 
 # ---------------------------------------------------------------------------- batches
 
+
 def test_batch_matches_single_fits_and_isolates_bad_sets():
     rng = np.random.default_rng(3)
     sets, truth = [], []
@@ -250,8 +262,9 @@ def test_batch_matches_single_fits_and_isolates_bad_sets():
         raw, _ = distorted_sphere(200, offset=off, matrix=m, noise=0.003, seed=i)
         sets.append(raw)
         truth.append((off, m))
-    sets[5] = sets[5][:6]                       # too few points
-    sets[9] = sets[9].copy(); sets[9][0, 0] = np.nan  # NaN
+    sets[5] = sets[5][:6]  # too few points
+    sets[9] = sets[9].copy()
+    sets[9][0, 0] = np.nan  # NaN
     b = tc.fit_batch(sets, radius=1.0)
     assert len(b) == 20 and b.offsets.shape == (20, 3) and b.matrices.shape == (20, 3, 3)
     assert "at least 10 points" in b.errors[5] and "NaN" in b.errors[9]
@@ -267,8 +280,9 @@ def test_batch_matches_single_fits_and_isolates_bad_sets():
 
 def test_batch_from_a_3d_array():
     axis = np.diag(np.diag(MATRIX))
-    raws = np.stack([distorted_sphere(150, offset=OFFSET + i, matrix=axis, seed=i)[0]
-                     for i in range(8)])
+    raws = np.stack(
+        [distorted_sphere(150, offset=OFFSET + i, matrix=axis, seed=i)[0] for i in range(8)]
+    )
     b = tc.fit_batch(raws, model="axis")
     np.testing.assert_allclose(b.offsets, OFFSET + np.arange(8)[:, None], atol=1e-6)
     with pytest.raises(tc.CalibrationError, match=r"\(B, N, 3\)"):
@@ -276,6 +290,7 @@ def test_batch_from_a_3d_array():
 
 
 # ---------------------------------------------------------------------------- seed searches
+
 
 def test_sphere_error_is_the_seed_sum():
     pts = np.array([[1.0, 2.0, 3.0], [-1.0, 0.0, 2.0], [0.5, 0.5, 0.5]])
@@ -292,13 +307,15 @@ def test_descent_and_grid_find_the_centre_in_counts():
     # the descent's centre is a local minimum of the error sum at the final resolution
     for k in range(3):
         for s in (-0.01, 0.01):
-            c = d.center.copy(); c[k] += s
+            c = d.center.copy()
+            c[k] += s
             assert tc.sphere_error(raw, c, 16384.0) >= d.error * (1 - 1e-12)
     fixed = tc.descend_center(raw, 16384.0, step=10.0, min_step=10.0)
     assert np.all(np.abs(fixed.center - d.center) <= 10.0 + 1e-9)
-    g = tc.grid_center(raw, 16384.0, lo=np.round(d.center) - 20, hi=np.round(d.center) + 20,
-                       step=5.0)
-    assert g.iterations == 9 ** 3
+    g = tc.grid_center(
+        raw, 16384.0, lo=np.round(d.center) - 20, hi=np.round(d.center) + 20, step=5.0
+    )
+    assert g.iterations == 9**3
     assert np.all(np.abs(g.center - d.center) <= 5.0)
 
 
@@ -309,8 +326,7 @@ def test_search_bad_input():
         tc.grid_center(GOOD, 1.0, lo=-1e6, hi=1e6, step=1e-3)
     with pytest.raises(tc.CalibrationError, match="radius"):
         tc.descend_center(GOOD, None)
-    d = tc.descend_center(GOOD, 1.0 / np.mean(np.diag(MATRIX)), step=1.0, min_step=1e-6,
-                          max_iter=3)
+    d = tc.descend_center(GOOD, 1.0 / np.mean(np.diag(MATRIX)), step=1.0, min_step=1e-6, max_iter=3)
     assert not d.converged and d.iterations == 3  # the guard against a hang
 
 
@@ -322,6 +338,7 @@ def test_linear_sphere_fit():
 
 
 # ---------------------------------------------------------------------------- the GIL
+
 
 def test_fits_release_the_gil():
     """A pure-Python thread keeps running while the core fits: the GIL is released."""
@@ -352,8 +369,9 @@ def test_fits_release_the_gil():
 def test_concurrent_fits_from_a_thread_pool_are_correct():
     from concurrent.futures import ThreadPoolExecutor
 
-    sets = [distorted_sphere(3000, offset=OFFSET * (i + 1), matrix=MATRIX, seed=i)[0]
-            for i in range(8)]
+    sets = [
+        distorted_sphere(3000, offset=OFFSET * (i + 1), matrix=MATRIX, seed=i)[0] for i in range(8)
+    ]
     with ThreadPoolExecutor(4) as ex:
         fits = list(ex.map(lambda s: tc.fit_ellipsoid(s, radius=1.0), sets))
     for i, f in enumerate(fits):

@@ -28,8 +28,7 @@ def as_points(points: Any, name: str = "points", min_rows: int = 0) -> np.ndarra
         )
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise CalibrationError(
-            f"{name} must have shape (N, 3), one row of x, y, z per reading; got shape "
-            f"{arr.shape}"
+            f"{name} must have shape (N, 3), one row of x, y, z per reading; got shape {arr.shape}"
         )
     if arr.shape[0] < min_rows:
         raise CalibrationError(f"{name} needs at least {min_rows} rows, got {arr.shape[0]}")

@@ -116,7 +116,7 @@ class EllipsoidFit:
         Examples
         --------
         >>> import numpy as np, triaxcal as tc
-        >>> pts = np.array([[2, 0, 0], [0, 1, 0], [0, -1, 0], [1, 0, 1], [1, 0, -1], [1.7, 0.7, 0.1]])
+        >>> pts = np.array([[2, 0, 0], [0, 0, 0], [1, 1, 0], [1, -1, 0], [1, 0, 1], [1, 0, -1]])
         >>> fit = tc.fit_sphere(pts, radius=1.0)
         >>> np.round(fit.apply([[2, 0, 0]]), 6).tolist()
         [[1.0, 0.0, 0.0]]
@@ -209,7 +209,12 @@ def fit_ellipsoid(
     pts = as_points(points)
     r = as_radius(radius)
     d = _core.fit_ellipsoid(
-        pts, model=model, radius=r, max_iter=max_iter, tol=float(tol), method=method,
+        pts,
+        model=model,
+        radius=r,
+        max_iter=max_iter,
+        tol=float(tol),
+        method=method,
         debias=bool(debias),
     )
     return EllipsoidFit._from_core(d)
@@ -319,14 +324,21 @@ def fit_batch(
     else:
         if isinstance(sets, np.ndarray) and sets.ndim != 1:
             raise CalibrationError(
-                f"sets must be a (B, N, 3) array or a sequence of (N, 3) arrays, got shape {sets.shape}"
+                "sets must be a (B, N, 3) array or a sequence of (N, 3) arrays, got shape "
+                f"{sets.shape}"
             )
         parts = [as_points(s, name=f"sets[{i}]") for i, s in enumerate(_as_sequence(sets))]
         bounds = np.zeros(len(parts) + 1, dtype=np.int64)
         bounds[1:] = np.cumsum([len(p) for p in parts])
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
     d = _core.fit_batch(
-        flat, bounds, model=model, radius=r, max_iter=max_iter, tol=float(tol), method=method,
+        flat,
+        bounds,
+        model=model,
+        radius=r,
+        max_iter=max_iter,
+        tol=float(tol),
+        method=method,
         debias=bool(debias),
     )
     for k in ("offsets", "matrices", "radii", "rms", "converged", "iterations"):

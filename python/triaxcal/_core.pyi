@@ -1,0 +1,71 @@
+"""Stubs of the compiled core (``rust/py/mod.rs``). Use the ``triaxcal`` package instead."""
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "__version__",
+    "CalibrationError",
+    "NonFiniteError",
+    "TooFewPointsError",
+    "DegenerateDataError",
+    "sphere_error",
+    "descend_center",
+    "grid_center",
+    "fit_sphere_linear",
+    "fit_ellipsoid",
+    "fit_batch",
+    "apply",
+]
+
+__version__: str
+
+class CalibrationError(ValueError): ...
+class NonFiniteError(CalibrationError): ...
+class TooFewPointsError(CalibrationError): ...
+class DegenerateDataError(CalibrationError): ...
+
+_Points = npt.NDArray[np.float64]
+_Vec3 = tuple[float, float, float]
+
+def sphere_error(points: _Points, center: _Vec3, radius: float) -> float: ...
+def descend_center(
+    points: _Points,
+    radius: float,
+    *,
+    start: _Vec3,
+    step: float,
+    min_step: float,
+    shrink: float,
+    max_iter: int,
+) -> dict[str, Any]: ...
+def grid_center(
+    points: _Points, radius: float, *, lo: _Vec3, hi: _Vec3, step: float
+) -> dict[str, Any]: ...
+def fit_sphere_linear(points: _Points) -> tuple[_Vec3, float, float]: ...
+def fit_ellipsoid(
+    points: _Points,
+    *,
+    model: str,
+    radius: float | None,
+    max_iter: int,
+    tol: float,
+    method: str,
+    debias: bool,
+) -> dict[str, Any]: ...
+def fit_batch(
+    points: _Points,
+    bounds: npt.NDArray[np.int64],
+    *,
+    model: str,
+    radius: float | None,
+    max_iter: int,
+    tol: float,
+    method: str,
+    debias: bool,
+) -> dict[str, Any]: ...
+def apply(
+    points: _Points, offset: _Vec3, matrix: list[list[float]]
+) -> npt.NDArray[np.float64]: ...
