@@ -141,7 +141,8 @@ def test_ferraris_on_the_imucal_annotated_session(realdata):
 def test_ferraris_names_missing_sections(realdata):
     parts = load_ferraris_annotated(realdata)
     part = {k: v for k, v in parts.items() if k not in ("y_a", "z_rot")}
-    with pytest.raises(tc.CalibrationError, match="static poses missing: y_a; rotations missing: z_rot"):
+    msg = "static poses missing: y_a; rotations missing: z_rot"
+    with pytest.raises(tc.CalibrationError, match=msg):
         tc.ferraris(part, rate_hz=204.8)
     small = dict(parts)
     small["y_rot"] = (parts["y_rot"][0][:40], parts["y_rot"][1][:40])

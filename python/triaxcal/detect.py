@@ -113,7 +113,9 @@ def _as_samples(samples: Any, name: str = "samples", allow_empty: bool = True) -
     try:
         arr = np.asarray(samples)
     except (ValueError, TypeError) as exc:
-        raise CalibrationError(f"{name} must be an (N, K) array of numbers, K >= 3 ({exc})") from None
+        raise CalibrationError(
+            f"{name} must be an (N, K) array of numbers, K >= 3 ({exc})"
+        ) from None
     if arr.dtype.kind not in "iuf":
         raise CalibrationError(f"{name} must hold real numbers, got dtype {arr.dtype}")
     if arr.ndim != 2 or arr.shape[1] < 3:
@@ -274,7 +276,8 @@ class _Segmenter:
             noise = float(std[list(self.columns)].max())
             if noise > self.max_std:
                 self.rejected.append(
-                    Rejection(start, end, TOO_NOISY, f"std {noise:.4g} > max_std {self.max_std:.4g}")
+                    Rejection(start, end, TOO_NOISY,
+                              f"std {noise:.4g} > max_std {self.max_std:.4g}")
                 )
             else:
                 dmin = np.inf
@@ -649,7 +652,9 @@ def detect_still(
         if b - a >= max(min_n, 1):
             intervals.append((a, b))
         else:
-            rejected.append(Rejection(a, b, TOO_SHORT, f"{(b - a) / rate:.3g} s < {min_duration_s} s"))
+            rejected.append(
+                Rejection(a, b, TOO_SHORT, f"{(b - a) / rate:.3g} s < {min_duration_s} s")
+            )
     level.setflags(write=False)
     return StillDetection(intervals, rejected, rest, thr, level)
 

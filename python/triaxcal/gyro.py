@@ -57,11 +57,15 @@ def _as_rate(gyro: Any, name: str = "gyro") -> np.ndarray:
     if arr.dtype.kind not in "iuf":
         raise CalibrationError(f"{name} must hold real numbers, got dtype {arr.dtype}")
     if arr.ndim != 2 or arr.shape[1] != 3:
-        raise CalibrationError(f"{name} must have shape (N, 3), one row per sample; got {arr.shape}")
+        raise CalibrationError(
+            f"{name} must have shape (N, 3), one row per sample; got {arr.shape}"
+        )
     arr = np.ascontiguousarray(arr, dtype=np.float64)
     if not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
-        raise CalibrationError(f"{name} contains NaN or inf (first at row {bad}); repair or drop it")
+        raise CalibrationError(
+            f"{name} contains NaN or inf (first at row {bad}); repair or drop it"
+        )
     if arr.shape[0] < 2:
         raise CalibrationError(f"{name} needs at least 2 samples, got {arr.shape[0]}")
     return arr
@@ -146,7 +150,9 @@ def gyro_bias(
         if rate_hz is None:
             iv = [(0, g.shape[0])]
         else:
-            iv = detect_still(g, rate_hz=rate_hz, rest_s=rest_s, window_s=min(1.0, rest_s)).intervals
+            iv = detect_still(
+                g, rate_hz=rate_hz, rest_s=rest_s, window_s=min(1.0, rest_s)
+            ).intervals
     else:
         iv = [(int(a), int(b)) for a, b in intervals]
     iv = [(max(a, 0), min(b, g.shape[0])) for a, b in iv if min(b, g.shape[0]) > max(a, 0)]

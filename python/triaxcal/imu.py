@@ -219,9 +219,10 @@ def _lm(problem: _GyroProblem, m0: np.ndarray, max_iter: int, tol: float) -> tup
     r = problem.residuals(x.reshape(1, 3, 3))[0].reshape(-1)
     cost = float(r @ r)
     lam = 1e-3
-    it = 0
+    iters = 0
     scale = np.abs(np.diag(m0)).mean()
     for it in range(1, max_iter + 1):
+        iters = it
         h = 1e-6 * scale
         cand = np.repeat(x[None], 9, axis=0) + np.eye(9) * h
         rr = problem.residuals(cand.reshape(9, 3, 3)).reshape(9, -1)
@@ -248,7 +249,7 @@ def _lm(problem: _GyroProblem, m0: np.ndarray, max_iter: int, tol: float) -> tup
             lam *= 10
         if not improved or rel < tol:
             break
-    return x.reshape(3, 3), it
+    return x.reshape(3, 3), iters
 
 
 def _as_triad(x: Any, name: str) -> np.ndarray:
@@ -263,7 +264,9 @@ def _as_triad(x: Any, name: str) -> np.ndarray:
     arr = np.ascontiguousarray(arr, dtype=np.float64)
     if not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
-        raise CalibrationError(f"{name} contains NaN or inf (first at row {bad}); repair or drop it")
+        raise CalibrationError(
+            f"{name} contains NaN or inf (first at row {bad}); repair or drop it"
+        )
     return arr
 
 
@@ -334,7 +337,9 @@ def calibrate_imu(
     a = _as_triad(acc, "acc")
     g = _as_triad(gyro, "gyro")
     if a.shape[0] != g.shape[0]:
-        raise CalibrationError(f"acc has {a.shape[0]} rows, gyro {g.shape[0]}: sample them together")
+        raise CalibrationError(
+            f"acc has {a.shape[0]} rows, gyro {g.shape[0]}: sample them together"
+        )
     n = a.shape[0]
     rate = float(rate_hz)
     if not (np.isfinite(rate) and rate > 0):
