@@ -376,3 +376,39 @@ def test_concurrent_fits_from_a_thread_pool_are_correct():
         fits = list(ex.map(lambda s: tc.fit_ellipsoid(s, radius=1.0), sets))
     for i, f in enumerate(fits):
         np.testing.assert_allclose(f.offset, OFFSET * (i + 1), atol=1e-6)
+
+
+def test_auto_model_picks_by_information_criterion_and_says_why():
+    rng = np.random.default_rng(2)
+    u = rng.normal(size=(800, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    sphere_like = u * 50 + [3, -2, 1] + rng.normal(scale=0.3, size=u.shape)
+    f = tc.fit_ellipsoid(sphere_like, model="auto")
+    assert f.model == "sphere" and "sphere" in f.model_reason
+    skewed, _ = distorted_sphere(800, offset=OFFSET, matrix=MATRIX, noise=0.002, seed=4)
+    f = tc.fit_ellipsoid(skewed, model="auto", radius=1.0)
+    assert f.model == "full" and f.model_reason
+    assert tc.fit_ellipsoid(skewed, model="full").model_reason is None
+
+
+def test_fit_streams_without_copying_the_points():
+    """Peak memory of a fit on 3M points stays far below one copy of the input (72 MB)."""
+    import subprocess
+    import sys
+
+    code = """
+import resource, numpy as np, triaxcal as tc
+rng = np.random.default_rng(0)
+u = rng.normal(size=(3_000_000, 3)); u /= np.linalg.norm(u, axis=1, keepdims=True)
+p = np.ascontiguousarray(u * [1.1, 0.9, 1.0] + 0.1)
+del u
+tc.fit_ellipsoid(p[:1000])
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+f = tc.fit_ellipsoid(p)
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+assert f.converged
+print((after - before) * 1024, p.nbytes)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    extra, nbytes = (int(v) for v in out.stdout.split())
+    assert extra < 0.25 * nbytes, (extra, nbytes)

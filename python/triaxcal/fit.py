@@ -11,7 +11,7 @@ soft-iron terms (``offdiag``).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -78,6 +78,8 @@ class EllipsoidFit:
         Number of points fitted.
     warnings : tuple of str
         Plain-language warnings, e.g. poor coverage of the sphere, with what to do.
+    model_reason : str or None
+        With ``model="auto"``: why this model was chosen (see :func:`triaxcal.select.fit_auto`).
     """
 
     model: str
@@ -92,6 +94,7 @@ class EllipsoidFit:
     condition: float
     n: int
     warnings: tuple[str, ...] = field(default=())
+    model_reason: str | None = None
 
     @classmethod
     def _from_core(cls, d: dict) -> EllipsoidFit:
@@ -159,9 +162,10 @@ def fit_ellipsoid(
     ----------
     points : array_like, shape (N, 3)
         Raw readings, any real dtype (int16 counts straight from a sensor are fine).
-    model : {"full", "axis", "sphere"}
+    model : {"full", "axis", "sphere", "auto"}
         ``"sphere"``: offset + one scale; ``"axis"``: offset + 3 gains; ``"full"``: offset +
-        symmetric 3x3 (scale, cross-axis, soft iron).
+        symmetric 3x3 (scale, cross-axis, soft iron); ``"auto"``: fit all three and keep the
+        one with the lowest Bayesian information criterion (``model_reason`` says why).
     radius : float, optional
         Magnitude calibrated readings must have: 1.0 for g, 9.80665 for m/s^2, 16384 for counts
         at +-2 g, the local field in uT. ``None`` keeps the data's own scale.
@@ -198,10 +202,17 @@ def fit_ellipsoid(
     >>> np.round(fit.offset, 6).tolist(), np.round(np.diag(fit.matrix), 6).tolist()
     ([0.05, -0.03, 0.02], [1.02, 0.98, 1.01])
     """
+    if model == "auto":
+        from .select import fit_auto  # select builds on this module
+
+        auto = fit_auto(
+            points, radius=radius, max_iter=max_iter, tol=tol, method=method, debias=debias
+        )
+        return replace(auto.fit, model_reason=auto.reason)
     if model not in MODELS:
         raise CalibrationError(
-            f"unknown model {model!r}: use 'sphere' (offset only), 'axis' (offset + 3 gains) or "
-            "'full' (offset + symmetric 3x3 matrix)"
+            f"unknown model {model!r}: use 'sphere' (offset only), 'axis' (offset + 3 gains), "
+            "'full' (offset + symmetric 3x3 matrix) or 'auto'"
         )
     if method not in METHODS:
         raise CalibrationError(f"unknown method {method!r}: use one of {METHODS}")
