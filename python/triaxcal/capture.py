@@ -423,7 +423,8 @@ def capture(
         Stop after this many rows, registered poses, or seconds. With none of them (and no
         ``stop``) the capture runs until Ctrl-C.
     stop : threading.Event, optional
-        Set it to stop; the bytes already on their way are read first (0.3 s of quiet).
+        Set it to stop; when streaming, the bytes already on their way are read first (until
+        0.3 s pass with no record).
     mode : {"new", "append", "overwrite"}
         What to do with an existing ``out``.
     columns : sequence of str, optional
@@ -511,6 +512,9 @@ def capture(
                     stopped_by = "poses"
                     break
                 if stop is not None and stop.is_set():
+                    if reader.polled:  # nothing is in flight between requests
+                        stopped_by = "stop"
+                        break
                     if recs:
                         quiet_since = None
                     elif quiet_since is None:

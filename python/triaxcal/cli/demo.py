@@ -47,7 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="triaxcal-demo", metavar="DIR",
                    help="folder for session.csv and results.json (default ./triaxcal-demo)")
     p.add_argument("--protocol", default="framed", choices=PROTOCOLS,
-                   help="wire protocol between the simulated board and the host (default framed)")
+                   help="wire protocol between the simulated board and the host, streamed "
+                        "(default framed)")
     p.add_argument("--speed", type=float, default=40.0,
                    help="simulated seconds per real second (default 40)")
     p.add_argument("--seed", type=int, default=1, help="seed of the simulated sensor (default 1)")
@@ -82,7 +83,7 @@ def run_demo(
     session = out / "session.csv"
     channels = None if protocol == "raw" else 10
     with SimDevice(imu, script, rate_hz=RATE_HZ, speed=speed, loop=False, seed=seed) as dev:
-        reader = SerialReader(dev.port, protocol=protocol, channels=channels)
+        reader = SerialReader(dev.port, protocol=protocol, channels=channels, stream=True)
         if progress is not None:
             print(f"triaxcal demo: simulated board on {dev.port} ({dev.pty_path}), "
                   f"{len(script)} poses of the globe scheme, {protocol} protocol, "

@@ -1,0 +1,76 @@
+"""`triaxcal demo` end to end: simulated board on a pty -> capture -> detect -> fit."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+from triaxcal import sim
+from triaxcal.capture import read_session
+from triaxcal.cli import main
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    t0 = time.monotonic()
+    rc = main(["demo", "--out", str(out), "--quiet"])
+    elapsed = time.monotonic() - t0
+    return rc, out, json.loads((out / "results.json").read_text()), elapsed
+
+
+def test_demo_runs_and_writes_session_and_results(demo, capsys):
+    rc, out, res, elapsed = demo
+    assert rc == 0
+    assert elapsed < 45  # "well under a minute"; typically ~4 s
+    cols, data = read_session(out / "session.csv")
+    assert cols == ("t", *sim.CHANNELS_10)
+    assert len(data) == res["capture"]["rows"] > 10000
+    # the session holds what the simulated board sent (frames, not simulator arrays)
+    assert res["capture"]["frames_sent"] >= len(data)
+    assert res["capture"]["dropped_frames"] == 0 and res["capture"]["lost_frames"] == 0
+    assert res["poses"] == 84
+    assert np.all(np.diff(data[:, 0]) >= 0)  # host time, in order
+
+
+def test_demo_recovers_accelerometer_within_noise(demo):
+    _, _, res, _ = demo
+    truth = sim.SimIMU(res["seed"]).truth.accel
+    acc = res["recovered"]["accel"]
+    assert acc["within_noise"]
+    rec_off = np.array(acc["offset"])
+    rec_m = np.array(acc["matrix"])
+    # independent of the fit's own standard errors: 84 poses of ~50 samples at 30 counts rms
+    # noise put each pose mean within ~4 counts, so offsets within ~6 counts (5 sigma) and
+    # the matrix within ~2e-4 relative
+    np.testing.assert_allclose(rec_off, truth.offset, atol=6.0)
+    np.testing.assert_allclose(rec_m * 16384, truth.matrix * 16384, atol=6e-4)
+    for p in acc["params"]:
+        assert abs(p["error"]) <= 4 * p["stderr"], p
+    # and the recovered calibration beats the nominal one by far
+    assert np.abs(rec_off - truth.offset).max() < 0.05 * np.abs(truth.offset).max()
+
+
+def test_demo_recovers_magnetometer_and_gyro_bias(demo):
+    _, _, res, _ = demo
+    truth = sim.SimIMU(res["seed"]).truth
+    mag = res["recovered"]["mag"]
+    assert mag["within_noise"]
+    np.testing.assert_allclose(mag["offset"], truth.mag.offset, atol=2.0)  # counts (0.2 uT)
+    gyro = res["recovered"]["gyro"]
+    np.testing.assert_allclose(gyro["offset"], truth.gyro.offset, atol=1.5)  # counts
+    assert res["truth"]["accel"]["offset"] == pytest.approx(truth.accel.offset.tolist())
+
+
+def test_demo_prints_a_table_with_units(tmp_path, capsys):
+    rc = main(["demo", "--out", str(tmp_path), "--quiet", "--protocol", "binary", "--seed", "2",
+               "--speed", "60"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    for word in ("accelerometer", "magnetometer", "gyroscope", "offset_x", "scale_x",
+                 "counts", "g/count", "uT/count", "deg/s", "within 4 standard errors: yes"):
+        assert word in text, word
+    res = json.loads((tmp_path / "results.json").read_text())
+    assert res["protocol"] == "binary" and res["ok"]
