@@ -100,7 +100,8 @@ def run_demo(
                        min_separation=0.0)
     # Twisting about the vertical does not move the accelerometer, so keep only the parts
     # of each pose where the gyroscope is still too (variance detector, noise floor learnt
-    # from the initial rest), and trim a window off each end of the accelerometer's runs against motion blur.
+    # from the initial rest), and trim a window off each end of the accelerometer's runs
+    # against motion blur.
     gyro_still = detect_still(values[:, g_cols], rate_hz=RATE_HZ, window_s=0.25, rest_s=1.0,
                               k=5.0, min_duration_s=0.5)
     trim = det.window
