@@ -403,7 +403,12 @@ class BinaryDecoder:
     flipped terminator byte, or a burst of garbage, costs the damaged frame and at most two
     or three frames around it. Without a checksum, a flipped data byte gives a wrong row. A
     frame with a dropped byte passes as good only if the two bytes that land on terminator
-    places are both 0x0A (about 1 in 65536 with noisy data). With a false phase present,
+    places are both 0x0A (about 1 in 65536 with noisy data). If the last channel's high byte
+    is 0x0A in every frame, a frame that lost its first byte, read from the previous frame's
+    terminator on, is a perfect frame (first value's low byte wrong). With a false phase
+    present, a run of lost or inserted bytes whose length moves the stream exactly onto it
+    cannot be told from a clean stream whose values jumped, and gives wrong rows until that
+    byte changes. With a false phase present,
     damage in the first three frames of a stream (before there is any history) or in its
     last three frames (where :meth:`flush` has little look-ahead) can make wrong rows. Where
     that matters, use the framed protocol.
@@ -432,7 +437,14 @@ class BinaryDecoder:
         self._ref: int | None = None  # phase (offset mod L) where sync was lost
         self._hunt_dropped = False
         self._recent: deque[tuple[int, ...]] = deque(maxlen=3)  # last accepted records
+        self._step: float | None = None  # typical change between consecutive records
+        self._hunted = 0  # bytes dropped since the last accepted frame
         self._reply_over = False  # polled: the reply was decided; later bytes are extra
+
+    @property
+    def buffered(self) -> int:
+        """Bytes held back waiting for the rest of a frame or line (bounded)."""
+        return len(self._buf)
 
     def reset(self) -> None:
         """Discard partial state (counters are kept).
@@ -451,6 +463,8 @@ class BinaryDecoder:
         self._ref = None
         self._hunt_dropped = False
         self._recent.clear()
+        self._step = None
+        self._hunted = 0
         self._reply_over = False
 
     def feed(self, data: bytes) -> list[tuple[int, ...]]:
@@ -498,7 +512,11 @@ class BinaryDecoder:
     # -- streaming
     def _accept(self, buf: bytearray, i: int, out: list) -> None:
         rec = self._unpack(buf, i)
+        if self._recent:
+            step = sum(abs(a - b) for a, b in zip(rec, self._recent[-1]))
+            self._step = step if self._step is None else 0.9 * self._step + 0.1 * step
         self._recent.append(rec)
+        self._hunted = 0
         out.append(rec)
         self.stats.frames += 1
 
@@ -506,6 +524,7 @@ class BinaryDecoder:
         if count <= 0:
             return
         self.stats.dropped_bytes += count
+        self._hunted += count
         if not self._hunt_dropped:
             self.stats.dropped_frames += 1
             self._hunt_dropped = True
@@ -517,25 +536,17 @@ class BinaryDecoder:
         rec = self._unpack(buf, s)
         return min(sum(abs(a - b) for a, b in zip(rec, last)) for last in self._recent)
 
-    def _better_phase(self, buf: bytearray, i: int, n: int) -> int:
-        # 0, or the shift a (1..2L-1, not L) to another frame start that passes the same checks and
-        # whose record is closer to the last accepted one than the record at i
-        L = self.frame_len
-        if not self._recent or n - i < 4 * L:
+    def _roughness(self, buf: bytearray, s: int, frames: int) -> int:
+        # mean change between the consecutive frames from s on: small for the true phase, large
+        # for a false one (its values put a noisy low byte in the high byte: noise x 256)
+        if frames < 2:
             return 0
-        best, best_d = 0, -1
-        for a in range(1, 2 * L):
-            if a == L:
-                continue
-            s = i + a
-            if buf[s - 1] != _TERM or buf[s + L - 1] != _TERM or buf[s + 2 * L - 1] != _TERM:
-                continue
-            if best_d < 0:
-                best_d = self._distance(buf, i)
-            d = self._distance(buf, s)
-            if d < best_d:
-                best, best_d = a, d
-        return best
+        L = self.frame_len
+        recs = [self._unpack(buf, s + j * L) for j in range(frames)]
+        total = sum(
+            sum(abs(a - b) for a, b in zip(r0, r1)) for r0, r1 in zip(recs, recs[1:])
+        )
+        return total // (frames - 1)
 
     def _process(self, *, final: bool) -> list[tuple[int, ...]]:
         L = self.frame_len
@@ -546,29 +557,22 @@ class BinaryDecoder:
         out: list[tuple[int, ...]] = []
         while n - i >= L:
             if self._synced:
-                if n - i < 4 * L and not final:
+                if n - i < M * L and not final:
                     break
-                if buf[i + L - 1] == _TERM and (n - i < 2 * L or buf[i + 2 * L - 1] == _TERM):
-                    alt = self._better_phase(buf, i, n)
-                    if alt:
-                        # a byte column that is 0x0A in every frame made a second phase that
-                        # passes the terminator checks; the smoother one wins
-                        self._hunt_dropped = False
-                        self._drop(alt)
-                        i += alt
+                if all(buf[e] == _TERM for e in range(i + L - 1, min(i + M * L, n), L)):
                     self._accept(buf, i, out)
                     i += L
                     continue
                 self._synced = False
                 self._ref = (self._pos + i) % L
                 self._hunt_dropped = False
-            # hunting: choose a frame start among [i, i + 3L)
-            if n - i < (M + 3) * L and not final:
+            # hunting: choose a frame start among [i, i + 4L)
+            if n - i < (M + 4) * L and not final:
                 break
             best = -1
             best_score: tuple[int, int] = (0, 0)
             scores: dict[int, int] = {}
-            for s in range(i, min(i + 3 * L, n)):
+            for s in range(i, min(i + 4 * L, n)):
                 prev = buf[s - 1] if s > 0 else self._prev
                 if self._ref is None:
                     dist = 0
@@ -588,7 +592,10 @@ class BinaryDecoder:
                     lined_up += 1
                 if lined_up <= 0:
                     continue
-                score = (self._distance(buf, s), dist)
+                if prev is None and (lined_up == M or final):
+                    best, best_score = s, (0, 0)  # a stream that starts with a whole frame
+                    break
+                score = (self._distance(buf, s) + self._roughness(buf, s, lined_up), dist)
                 scores[s] = score[0]
                 if best < 0 or score < best_score:
                     best, best_score = s, score
@@ -597,6 +604,13 @@ class BinaryDecoder:
             # take the earlier frame rather than drop it
             while best - L >= i and scores.get(best - L, bound + 1) <= bound:
                 best -= L
+            if (
+                best >= 0
+                and self._step is not None
+                and best_score[0] > max(16 * self._step, 32 * self.channels)
+                and self._hunted < 8 * L
+            ):
+                best = -1  # far from everything recent: a false phase; keep looking a while
             if best < 0 or best >= i + L:
                 # nothing here, or the best start lies a frame ahead: look again from there,
                 # so that it is weighed against every start up to a frame after it
@@ -648,10 +662,13 @@ class FramedDecoder:
         self.stats = DecoderStats()
         self._buf = bytearray()
         self._overflow = False
-        # longest encoded frame: seq + 2K + CRC, plus COBS overhead
-        k = self.channels if self.channels is not None else MAX_CHANNELS
-        raw = 1 + 2 * k + 2
-        self._max_encoded = raw + raw // 254 + 1
+        # frames longer than the longest valid one (plus garbage room) are not kept whole
+        self._max_encoded = 2 * self._encoded_len(MAX_CHANNELS)
+
+    @property
+    def buffered(self) -> int:
+        """Bytes held back waiting for the rest of a frame or line (bounded)."""
+        return len(self._buf)
 
     def reset(self) -> None:
         """Discard a partial frame (counters kept; the next seq starts a new run)."""
@@ -699,6 +716,27 @@ class FramedDecoder:
         return out
 
     def _decode(self, frame: bytes) -> tuple[int, ...] | None:
+        rec = self._check(frame)
+        if rec is None and self.channels is not None:
+            # garbage with no 0x00 in it glued itself in front of a good frame: an encoded
+            # frame of K channels has a fixed length, so try the tail
+            size = self._encoded_len(self.channels)
+            if len(frame) > size:
+                rec = self._check(frame[-size:])
+                if rec is not None:
+                    self.stats.dropped_bytes += len(frame) - size
+                    return rec
+        if rec is None:
+            self.stats.dropped_bytes += len(frame) + 1
+            self.stats.dropped_frames += 1
+        return rec
+
+    @staticmethod
+    def _encoded_len(k: int) -> int:
+        raw = 1 + 2 * k + 2
+        return raw + 1 + (raw - 1) // 254
+
+    def _check(self, frame: bytes) -> tuple[int, ...] | None:
         try:
             payload = cobs_decode(frame)
         except CalibrationError:
@@ -711,13 +749,9 @@ class FramedDecoder:
             crc = payload[-2] | (payload[-1] << 8)
             ok = crc16_ccitt(payload[:-2]) == crc
         if not ok:
-            self.stats.dropped_bytes += len(frame) + 1
-            self.stats.dropped_frames += 1
             return None
         if self.channels is None:
             self.channels = k
-            raw = 1 + 2 * k + 2
-            self._max_encoded = raw + raw // 254 + 1
         seq = payload[0]
         if self.stats.last_seq is not None:
             self.stats.lost_frames += (seq - self.stats.last_seq - 1) % 256
@@ -748,6 +782,11 @@ class _LineDecoder:
         self.stats = DecoderStats()
         self._buf = bytearray()
         self._overlong = False
+
+    @property
+    def buffered(self) -> int:
+        """Bytes held back waiting for the rest of a frame or line (bounded)."""
+        return len(self._buf)
 
     def reset(self) -> None:
         """Discard a partial line (counters kept)."""
