@@ -74,3 +74,19 @@ def test_demo_prints_a_table_with_units(tmp_path, capsys):
         assert word in text, word
     res = json.loads((tmp_path / "results.json").read_text())
     assert res["protocol"] == "binary" and res["ok"]
+
+
+def test_readme_capture_example_runs(tmp_path, monkeypatch):
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    section = readme[readme.index("<!-- section: capture"):]
+    section = section[: section.index("<!-- /section -->")]
+    code = re.findall(r"```python\n(.*?)```", section, re.S)[0]
+    monkeypatch.chdir(tmp_path)
+    env: dict = {}
+    exec(compile(code, "README.md", "exec"), env)
+    assert env["result"].stopped_by == "poses" and len(env["result"].poses) == 10
+    assert abs(np.linalg.norm(env["g"], axis=1).mean() - 1.0) < 1e-3
+    assert (tmp_path / "session.csv").read_text().startswith("t,ax,ay,az,")

@@ -47,7 +47,8 @@ def test_gyro_still_reads_offset_and_moving_reads_rate(globe):
     imu, rec = globe
     g = imu.truth.gyro
     still = rec.gyro[rec.still]
-    np.testing.assert_allclose(still.mean(axis=0), g.offset, atol=4 * g.noise / math.sqrt(len(still)) + 0.05)
+    tol = 4 * g.noise / math.sqrt(len(still)) + 0.05
+    np.testing.assert_allclose(still.mean(axis=0), g.offset, atol=tol)
     rate = g.apply(rec.gyro)
     err = rate - rec.gyro_rad_s
     assert np.sqrt((err**2).mean()) < 1.5 * g.noise * np.abs(g.matrix).max()
@@ -81,7 +82,9 @@ def test_rotation_script_turns_both_ways_about_each_axis():
         )
         turns.append(np.degrees(rec.gyro_rad_s[sel].sum(axis=0) * dt))
     turns = np.array(turns)
-    want = np.array([[360, 0, 0], [-360, 0, 0], [0, 360, 0], [0, -360, 0], [0, 0, 360], [0, 0, -360]])
+    want = np.array(
+        [[360, 0, 0], [-360, 0, 0], [0, 360, 0], [0, -360, 0], [0, 0, 360], [0, 0, -360]]
+    )
     np.testing.assert_allclose(turns, want, atol=0.5)
     # peak rate stays inside the +-250 deg/s range and counts inside int16
     assert np.degrees(np.abs(rec.gyro_rad_s)).max() < 250

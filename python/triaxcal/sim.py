@@ -91,7 +91,7 @@ def temp_raw_from_c(temp_c: Any) -> np.ndarray:
 
 
 def rotvec_to_matrix(rotvec: Any) -> np.ndarray:
-    """Rotation matrices from rotation vectors (axis * angle in rad), shape (..., 3) -> (..., 3, 3)."""
+    """Rotation matrices from rotation vectors (axis * angle, rad): (..., 3) -> (..., 3, 3)."""
     r = np.asarray(rotvec, dtype=np.float64)
     theta = np.linalg.norm(r, axis=-1)[..., None, None]
     small = theta < 1e-12
@@ -496,7 +496,8 @@ def globe_script(
     for i, phi_deg in enumerate(np.linspace(90.0, -90.0, latitudes)):
         phi = math.radians(phi_deg)
         n = np.array([math.cos(phi) * math.cos(az), math.cos(phi) * math.sin(az), math.sin(phi)])
-        e_n = np.array([-math.sin(phi) * math.cos(az), -math.sin(phi) * math.sin(az), math.cos(phi)])
+        sp = math.sin(phi)
+        e_n = np.array([-sp * math.cos(az), -sp * math.sin(az), math.cos(phi)])
         e_e = np.cross(e_n, n)
         order = range(turns) if i % 2 == 0 else range(turns - 1, -1, -1)
         for j in order:
