@@ -1,0 +1,213 @@
+#include "protocol.h"
+
+#include <string.h>
+
+#include "cobs.h"
+#include "crc16.h"
+
+static proto_writer put;
+static uint8_t mode = PROTO_MODE_POLLED;
+static uint8_t seq;
+
+static uint8_t pkt[MOTIONCAL_PACKET_LEN];
+static uint8_t pkt_len; /* 0: not inside a packet */
+static uint16_t pkt_start_ms;
+static struct motioncal cal;
+
+static void put_nothing(uint8_t byte) { (void)byte; }
+
+void proto_set_writer(proto_writer writer) { put = writer ? writer : put_nothing; }
+
+uint8_t proto_mode(void) { return mode; }
+
+const struct motioncal *proto_cal(void) { return &cal; }
+
+void proto_put_str(const char *s)
+{
+    while (*s) put((uint8_t)*s++);
+}
+
+void proto_put_int(int32_t v)
+{
+    char digits[11];
+    uint8_t n = 0;
+    uint32_t u;
+    if (v < 0) {
+        put('-');
+        u = (uint32_t)(-(v + 1)) + 1u;
+    } else {
+        u = (uint32_t)v;
+    }
+    do {
+        digits[n++] = (char)('0' + u % 10u);
+        u /= 10u;
+    } while (u);
+    while (n) put((uint8_t)digits[--n]);
+}
+
+void proto_put_fixed4(float x)
+{
+    /* round half away from zero to 1e-4, like printf("%.4f") for these magnitudes */
+    uint8_t neg = x < 0.0f;
+    float a = neg ? -x : x;
+    if (a > 200000.0f) a = 200000.0f; /* keep within int32 after scaling */
+    uint32_t scaled = (uint32_t)(a * 10000.0f + 0.5f);
+    uint32_t whole = scaled / 10000u;
+    uint16_t frac = (uint16_t)(scaled % 10000u);
+    if (neg && scaled) put('-');
+    proto_put_int((int32_t)whole);
+    put('.');
+    put((uint8_t)('0' + frac / 1000u));
+    put((uint8_t)('0' + frac / 100u % 10u));
+    put((uint8_t)('0' + frac / 10u % 10u));
+    put((uint8_t)('0' + frac % 10u));
+}
+
+void proto_send_binary(const int16_t *values, uint8_t k)
+{
+    for (uint8_t i = 0; i < k; i++) {
+        uint16_t u = (uint16_t)values[i];
+        put((uint8_t)(u & 0xFF));
+        put((uint8_t)(u >> 8));
+    }
+    put('\n');
+}
+
+void proto_send_framed(const int16_t *values, uint8_t k)
+{
+    uint8_t raw[1 + 2 * PROTO_MAX_CHANNELS + 2];
+    uint8_t enc[sizeof raw + sizeof raw / 254 + 1];
+    if (k > PROTO_MAX_CHANNELS) k = PROTO_MAX_CHANNELS;
+    uint8_t n = 0;
+    raw[n++] = seq++;
+    for (uint8_t i = 0; i < k; i++) {
+        uint16_t u = (uint16_t)values[i];
+        raw[n++] = (uint8_t)(u & 0xFF);
+        raw[n++] = (uint8_t)(u >> 8);
+    }
+    uint16_t crc = crc16_ccitt(raw, n);
+    raw[n++] = (uint8_t)(crc & 0xFF);
+    raw[n++] = (uint8_t)(crc >> 8);
+    uint16_t m = cobs_encode(raw, n, enc);
+    for (uint16_t i = 0; i < m; i++) put(enc[i]);
+    put(0);
+}
+
+void proto_send_text(const int16_t *values, uint8_t k)
+{
+    for (uint8_t i = 0; i < k; i++) {
+        if (i) put(',');
+        proto_put_int(values[i]);
+    }
+    put('\r');
+    put('\n');
+}
+
+void proto_send_raw_mpu(const int16_t *mpu)
+{
+    proto_put_str("Raw:");
+    for (uint8_t i = 0; i < 9; i++) {
+        int32_t v = 0;
+        if (i < 3) {
+            v = mpu[i] / 2; /* 16384 -> 8192 counts per g */
+        } else if (i < 6) {
+            v = (int32_t)mpu[i] * 16 / 131; /* 131 -> 16 counts per deg/s */
+        }
+        if (i) put(',');
+        proto_put_int(v);
+    }
+    put('\r');
+    put('\n');
+}
+
+void proto_send_stream(const int16_t *values, uint8_t k)
+{
+    switch (mode) {
+    case PROTO_MODE_BINARY: proto_send_binary(values, k); break;
+    case PROTO_MODE_FRAMED: proto_send_framed(values, k); break;
+    case PROTO_MODE_TEXT: proto_send_text(values, k); break;
+    case PROTO_MODE_RAW: proto_send_raw_mpu(values); break;
+    default: break;
+    }
+}
+
+static float get_f32(const uint8_t *p)
+{
+    float f;
+    memcpy(&f, p, sizeof f); /* AVR and ARM are little-endian, float is IEEE binary32 */
+    return f;
+}
+
+void proto_send_cal_lines(const struct motioncal *c)
+{
+    proto_put_str("Cal1:");
+    const float one[10] = {c->accel[0], c->accel[1], c->accel[2], c->gyro[0], c->gyro[1],
+                           c->gyro[2],  c->mag[0],   c->mag[1],   c->mag[2],  c->field};
+    for (uint8_t i = 0; i < 10; i++) {
+        if (i) put(',');
+        proto_put_fixed4(one[i]);
+    }
+    proto_put_str("\r\nCal2:");
+    /* soft iron xx yy zz xy xz yz -> 3x3 row-major */
+    const float *s = c->soft;
+    const float two[9] = {s[0], s[3], s[4], s[3], s[1], s[5], s[4], s[5], s[2]};
+    for (uint8_t i = 0; i < 9; i++) {
+        if (i) put(',');
+        proto_put_fixed4(two[i]);
+    }
+    proto_put_str("\r\n");
+}
+
+static enum proto_event packet_done(void)
+{
+    uint16_t crc = crc16_modbus(pkt, MOTIONCAL_PACKET_LEN - 2);
+    uint16_t got = (uint16_t)pkt[MOTIONCAL_PACKET_LEN - 2] |
+                   (uint16_t)((uint16_t)pkt[MOTIONCAL_PACKET_LEN - 1] << 8);
+    pkt_len = 0;
+    if (crc != got) return PROTO_EV_NONE;
+    float f[16];
+    for (uint8_t i = 0; i < 16; i++) f[i] = get_f32(pkt + 2 + 4 * i);
+    memcpy(cal.accel, f, sizeof cal.accel);
+    memcpy(cal.gyro, f + 3, sizeof cal.gyro);
+    memcpy(cal.mag, f + 6, sizeof cal.mag);
+    cal.field = f[9];
+    memcpy(cal.soft, f + 10, sizeof cal.soft);
+    proto_send_cal_lines(&cal);
+    return PROTO_EV_CAL;
+}
+
+enum proto_event proto_feed(uint8_t byte, uint16_t now_ms)
+{
+    if (!put) put = put_nothing;
+    if (pkt_len && (uint16_t)(now_ms - pkt_start_ms) > MOTIONCAL_TIMEOUT_MS) {
+        pkt_len = 0; /* a packet cut short: treat this byte afresh */
+    }
+    if (pkt_len == 1) {
+        if (byte == 84) {
+            pkt[pkt_len++] = byte;
+            return PROTO_EV_NONE;
+        }
+        pkt_len = 0; /* 117 alone was not a packet start */
+    } else if (pkt_len) {
+        pkt[pkt_len++] = byte;
+        return pkt_len == MOTIONCAL_PACKET_LEN ? packet_done() : PROTO_EV_NONE;
+    }
+    switch (byte) {
+    case 117:
+        pkt[0] = byte;
+        pkt_len = 1;
+        pkt_start_ms = now_ms;
+        return PROTO_EV_NONE;
+    case PROTO_REQUEST:
+        return PROTO_EV_REQUEST;
+    case PROTO_MODE_POLLED:
+    case PROTO_MODE_BINARY:
+    case PROTO_MODE_FRAMED:
+    case PROTO_MODE_TEXT:
+    case PROTO_MODE_RAW:
+        mode = byte;
+        return PROTO_EV_MODE;
+    default:
+        return PROTO_EV_NONE;
+    }
+}
