@@ -141,6 +141,22 @@ def test_seven_channel_board(tmp_path):
     assert res.samples == 50
 
 
+def test_cli_polled_capture_at_a_fixed_rate(tmp_path, capsys):
+    out = tmp_path / "p.csv"
+    with device(speed=1.0) as dev:
+        t0 = time.monotonic()
+        rc = main(["capture", "--port", dev.port, "--protocol", "binary", "--poll-hz", "100",
+                   "--samples", "50", "--out", str(out), "--quiet", "--no-bell"])
+        elapsed = time.monotonic() - t0
+        sent = list(dev.sent)
+    assert rc == 0
+    assert 0.45 < elapsed < 3.0  # 50 requests at 100 per second
+    rows = session_rows(out)
+    check_exact(rows, sent)
+    assert len(set(rows)) >= 45  # one request per sample: (almost) no repeats
+    assert "sample count reached: 50 rows" in capsys.readouterr().err
+
+
 # ----------------------------------------------------------------------- injected faults
 
 

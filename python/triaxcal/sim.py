@@ -35,7 +35,6 @@ import select
 import tempfile
 import threading
 import time
-import tty
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -1084,6 +1083,8 @@ class SimDevice:
 
     # -- pty
     def _plug(self) -> None:
+        import tty  # POSIX only: importing triaxcal.sim must work everywhere
+
         master, slave = os.openpty()
         tty.setraw(slave)
         os.set_blocking(master, False)

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from ..capture import capture, channel_names
+from ..errors import CalibrationError
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
 
@@ -60,6 +61,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "7 for the AVR firmware; raw is always 9)")
     p.add_argument("--request-byte", type=_request_byte, default=b"!", metavar="BYTE",
                    help="request byte of polled binary (default 0x21, '!')")
+    p.add_argument("--poll-hz", type=float, default=None, metavar="HZ",
+                   help="polled binary: at most HZ requests per second (default: as fast as "
+                        "the board answers; set it to the sensor's output rate to avoid "
+                        "repeated samples)")
     p.add_argument("--stream", action="store_true",
                    help="binary: the board streams by itself (mode byte B) instead of being "
                         "polled")
@@ -88,6 +93,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.poll_hz is not None and not args.poll_hz > 0:
+        raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
     channels = args.channels
     if channels is None and args.protocol != "raw":
         channels = 10
@@ -99,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         stream=args.stream,
         request_byte=args.request_byte,
         switch_mode=not args.no_mode_byte,
+        poll_interval_s=1.0 / args.poll_hz if args.poll_hz else 0.0,
     )
     names = channel_names(args.protocol, channels)
     mode = "append" if args.append else "overwrite" if args.overwrite else "new"
