@@ -4,6 +4,7 @@ session CSV is checked row by row against that log."""
 
 from __future__ import annotations
 
+import shutil
 import signal
 import subprocess
 import sys
@@ -452,3 +453,44 @@ def _no_leftover_threads():
 
 
 
+
+
+# ----------------------------------------------------------------------- emulated firmware
+
+QEMU_TOOLS = [t for t in ("avr-gcc", "qemu-system-avr", "make") if shutil.which(t) is None]
+
+
+@pytest.mark.qemu
+@pytest.mark.skipif(bool(QEMU_TOOLS), reason=f"{QEMU_TOOLS} not found: run `make deps`")
+def test_capture_from_the_emulated_avr_firmware(tmp_path, capsys):
+    """`triaxcal capture` against the project's firmware in QEMU's Arduino Uno, as a board."""
+    import re
+
+    build = tmp_path / "build"
+    subprocess.run(["make", "-s", "-C", str(ROOT / "firmware"), f"BUILD={build}", "sim"],
+                   check=True, capture_output=True, timeout=180)
+    truth = dict(re.findall(r"#define\s+(SIM_\w+)\s+(-?\d+)",
+                            (ROOT / "firmware" / "src" / "sim_truth.h").read_text()))
+    gyro = np.array([int(truth[f"SIM_GYRO_OFFSET_{a}"]) for a in "XYZ"])
+    proc = subprocess.Popen(
+        ["qemu-system-avr", "-machine", "arduino-uno", "-bios", str(build / "triaxcal-sim.elf"),
+         "-nographic", "-serial", "pty", "-monitor", "none"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )
+    try:
+        line = proc.stdout.readline()
+        port = re.search(r"(/dev/pts/\d+)", line).group(1)
+        for protocol in ("binary", "framed", "text"):
+            out = tmp_path / f"{protocol}.csv"
+            rc = main(["capture", "--port", port, "--protocol", protocol, "--channels", "7",
+                       "--samples", "60", "--out", str(out), "--quiet"])
+            assert rc == 0, capsys.readouterr().err
+            cols, data = read_session(out)
+            assert cols == ("t", *sim.CHANNELS_7) and len(data) == 60
+            # a still-ish board: the gyro columns sit on the firmware's true offsets
+            np.testing.assert_allclose(np.median(data[:, 4:7], axis=0), gyro, atol=6)
+            assert abs(np.median(data[:, 7]) - int(truth["SIM_TEMP_RAW"])) <= 6
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+        proc.stdout.close()
