@@ -526,6 +526,15 @@ def capture(
                                          reader, poses, samples))
     except KeyboardInterrupt:
         stopped_by = "interrupt"
+    except BaseException:
+        # a failed start (silent board, wrong baud rate) leaves no empty session behind that
+        # would block running the same command again
+        writer.close()
+        if writer.rows == 0 and mode != "append":
+            with contextlib.suppress(OSError):
+                writer.path.unlink()
+        status.end()
+        raise
     finally:
         writer.close()
         reader.close()

@@ -42,6 +42,15 @@ import serial.tools.list_ports
 from ..errors import CalibrationError
 from .protocol import PROTOCOLS, DecoderStats, make_decoder
 
+try:  # a vanished POSIX port can also fail in tcflush/tcsetattr with termios.error
+    import termios
+
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (
+        serial.SerialException, OSError, termios.error
+    )
+except ImportError:  # pragma: no cover - Windows
+    _PORT_ERRORS = (serial.SerialException, OSError)
+
 __all__ = [
     "CaptureError",
     "DisconnectedError",
@@ -278,7 +287,7 @@ class SerialReader:
                 timeout=self.poll_timeout_s if self.polled else self.read_timeout_s,
                 write_timeout=1.0,
             )
-        except serial.SerialException as exc:
+        except _PORT_ERRORS as exc:
             code = getattr(exc, "errno", None)
             if code in (errno.ENOENT, errno.ENXIO, errno.ENODEV) or not os.path.exists(
                 self.port_name
@@ -296,12 +305,17 @@ class SerialReader:
                     "monitors, MotionCal, another triaxcal)"
                 ) from None
             raise CaptureError(f"could not open {self.port_name!r}: {exc}") from None
+        try:
+            if self.switch_mode:
+                port.write(mode_byte(self.protocol, polled=self.polled))
+                port.flush()
+                time.sleep(0.02)
+            port.reset_input_buffer()
+        except _PORT_ERRORS as exc:
+            with contextlib.suppress(Exception):
+                port.close()
+            raise CaptureError(f"{self.port_name} failed right after opening: {exc}") from None
         self._port = port
-        if self.switch_mode:
-            port.write(mode_byte(self.protocol, polled=self.polled))
-            port.flush()
-            time.sleep(0.02)
-        port.reset_input_buffer()
         self.decoder.reset()
         self._t_ok = time.monotonic()
         self._bytes_since_record = 0
@@ -342,7 +356,7 @@ class SerialReader:
             return []
         try:
             recs = self._poll() if self.polled else self._read_stream()
-        except (serial.SerialException, OSError) as exc:
+        except _PORT_ERRORS as exc:
             self._lost(exc)
             return []
         self._check_health(bool(recs))
