@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import serial
 import triaxcal
 from triaxcal.io.protocol import (
     BinaryDecoder,
@@ -123,7 +124,6 @@ class Board:
 
 @pytest.fixture(scope="module")
 def board(firmware_elf):
-    serial = pytest.importorskip("serial")
     proc = subprocess.Popen(
         [
             "qemu-system-avr", "-machine", "arduino-uno", "-bios", str(firmware_elf),
