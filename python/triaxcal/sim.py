@@ -808,7 +808,7 @@ class SimIMU:
             t0, t1 = float(temp_c[0]), float(temp_c[1])
         else:
             t0 = t1 = float(temp_c)
-        temp = t0 + (t1 - t0) * (ts / ts[-1] if n > 1 else 0.0)
+        temp = np.linspace(t0, t1, n)
         raw = {}
         for name, phys in (("accel", accel_g), ("gyro", omega), ("mag", mag_ut)):
             sens = tr.sensor(name)
@@ -1136,6 +1136,7 @@ class SimDevice:
                         time.sleep(0.005)
                         continue
                 master = self._master
+            assert master is not None
             try:
                 ready, _, _ = select.select([master], [], [], self._wait_s())
                 if ready:

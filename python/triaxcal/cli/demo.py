@@ -176,7 +176,7 @@ _PARAM_CELL = {"diag_x": (0, 0), "diag_y": (1, 1), "diag_z": (2, 2),
 def _compare(fit: EllipsoidFit, truth: SensorTruth, units: str) -> dict[str, Any]:
     """Recovered vs true parameters; matrix terms as ``scale`` (matrix * counts_per_unit)."""
     cpu = truth.counts_per_unit
-    rows = []
+    rows: list[dict[str, Any]] = []
     se = fit.stderr_dict
     for i, axis in enumerate("xyz"):
         rows.append({"name": f"offset_{axis}", "true": float(truth.offset[i]),

@@ -383,6 +383,7 @@ class SerialReader:
             if wait > 0:
                 time.sleep(wait)
         self._last_poll = time.monotonic()
+        assert self.channels is not None  # binary needs K
         frame_len = 2 * int(self.channels) + 1
         self.decoder.reset()
         port.reset_input_buffer()
