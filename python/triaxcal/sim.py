@@ -935,8 +935,9 @@ class SimDevice:
         Behave like a board on another baud rate: every byte sent is scrambled and commands
         are not understood (use with a streaming ``mode``).
     link : str or path, optional
-        Path of the symlink that :attr:`port` names (default: in a fresh temporary folder).
-        It stays the same across :meth:`unplug`, as ``/dev/ttyUSB0`` does.
+        Path of the symlink that :attr:`port` names (default: in a fresh temporary folder,
+        made by :meth:`start`). It stays the same across :meth:`unplug`, as ``/dev/ttyUSB0``
+        does.
     seed : int
         Seed of the default IMU and of the noise.
 
@@ -1001,10 +1002,8 @@ class SimDevice:
         self.finished = threading.Event()
         self.unplugs = 0
         self._link_dir: str | None = None
-        if link is None:
-            self._link_dir = tempfile.mkdtemp(prefix="triaxcal-sim-")
-            link = os.path.join(self._link_dir, "ttySIM0")
-        self.port = str(link)
+        #: Path to open with pyserial (a symlink to the pty; set by :meth:`start` if not given).
+        self.port: str = "" if link is None else str(link)
         self._master: int | None = None
         self._slave: int | None = None
         self.pty_path: str | None = None
@@ -1028,6 +1027,10 @@ class SimDevice:
         """Open the pseudo-terminal and start the device thread; returns ``self``."""
         if self._thread is not None:
             return self
+        if not self.port:
+            self._link_dir = tempfile.mkdtemp(prefix="triaxcal-sim-")
+            self.port = os.path.join(self._link_dir, "ttySIM0")
+        self._stop.clear()
         self._plug()
         self._t0 = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="SimDevice", daemon=True)
@@ -1044,6 +1047,8 @@ class SimDevice:
         if self._link_dir is not None:
             with contextlib.suppress(OSError):
                 os.rmdir(self._link_dir)
+            self._link_dir = None
+            self.port = ""
 
     def __enter__(self) -> SimDevice:  # noqa: PYI034
         return self.start()
