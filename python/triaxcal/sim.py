@@ -24,6 +24,13 @@ move gives exactly that rotation.
 
 Device channel order (K=10): ``ax ay az gx gy gz mx my mz temp``, int16 counts; nominal scales
 16384 counts/g, 131 counts/(deg/s), 10 counts/uT, ``T_degC = temp_raw / 340 + 36.53``.
+
+Offline: :class:`SimIMU` holds the truth and :meth:`SimIMU.record` samples it along a
+:class:`Script` (:func:`globe_script`, :func:`six_face_script`, :func:`rotation_script`).
+Online: :class:`SimDevice` serves the same samples on a pseudo-terminal in any of the wire
+protocols, answers the firmware's commands, runs faster than real time, injects
+:class:`Faults`, and can be unplugged or silenced; it logs every frame it sent
+(:class:`SentFrame`) so that tests can compare a capture with what went over the wire.
 """
 
 from __future__ import annotations

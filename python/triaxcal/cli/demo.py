@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..capture import capture, read_session
+from ..capture import CaptureResult, capture, read_session
 from ..detect import detect_poses, detect_still
 from ..errors import CalibrationError
 from ..fit import EllipsoidFit, fit_ellipsoid
@@ -139,7 +139,7 @@ def run_demo(
         },
     }
     ok = report["accel"]["within_noise"] and report["mag"]["within_noise"]
-    table = _table(report, accel_fit, mag_fit, len(means), cap.samples, truth.field_ut)
+    table = _table(report, accel_fit, mag_fit, len(means), cap, truth.field_ut)
     results = {
         "ok": bool(ok),
         "protocol": protocol,
@@ -201,9 +201,14 @@ def _compare(fit: EllipsoidFit, truth: SensorTruth, units: str) -> dict[str, Any
     }
 
 
-def _table(rep: dict, accel: EllipsoidFit, mag: EllipsoidFit, poses: int, rows: int,
+def _table(rep: dict, accel: EllipsoidFit, mag: EllipsoidFit, poses: int, cap: CaptureResult,
            field_ut: float) -> str:
-    lines = [f"triaxcal demo: {rows} samples captured, {poses} still poses fitted", ""]
+    d = cap.stats.decoder
+    lines = [
+        f"triaxcal demo: {cap.samples} samples captured in {cap.elapsed_s:.1f} s (dropped "
+        f"frames {d.dropped_frames}, lost {d.lost_frames}), {poses} still poses fitted",
+        "",
+    ]
     head = f"  {'parameter':<10} {'true':>12} {'recovered':>12} {'error':>10} {'std.err':>9}  unit"
     titles = (
         ("accel", f"accelerometer (model full, radius 1 g, rms {accel.rms:.2g} g)"),
