@@ -548,6 +548,34 @@ def test_decoders_never_raise(chunks):
         assert dec.stats.bytes_in == sum(len(c) for c in chunks)
 
 
+def streaming_decoders():
+    return [BinaryDecoder(3), BinaryDecoder(7), FramedDecoder(3), FramedDecoder(), TextDecoder(3),
+            TextDecoder(), RawDecoder()]
+
+
+frame_soup = st.lists(
+    st.one_of(
+        st.binary(max_size=20),
+        st.lists(nl_int16, min_size=3, max_size=3).map(encode_binary),
+        st.lists(nl_int16, min_size=7, max_size=7).map(encode_binary),
+        st.tuples(st.lists(int16, min_size=3, max_size=3), st.integers(0, 255)).map(
+            lambda a: encode_framed(*a)
+        ),
+        st.lists(int16, min_size=3, max_size=3).map(encode_text),
+        st.sampled_from([b"\n", b"\r\n", b"\x00", b"Raw:", b"1,2,3", b"acc: "]),
+    ),
+    max_size=30,
+).map(b"".join)
+
+
+@settings(max_examples=2 * EXAMPLES, deadline=None, database=None)
+@given(frame_soup, st.lists(st.integers(0, 10_000), max_size=20))
+def test_any_chunking_gives_the_same_records(data, cuts):
+    """Whatever the bytes, feeding them in pieces gives what feeding them at once gives."""
+    for whole, pieces in zip(streaming_decoders(), streaming_decoders()):
+        assert decode_all(pieces, chunked(data, cuts)) == decode_all(whole, [data])
+
+
 @pytest.mark.parametrize("dec", all_decoders(), ids=lambda d: type(d).__name__)
 def test_buffer_is_bounded(dec):
     rng = random.Random(3)

@@ -1,4 +1,5 @@
-"""Capture from sensor boards: wire protocols (:mod:`triaxcal.io.protocol`, pure) and readers."""
+"""Capture from sensor boards: the wire protocols (:mod:`triaxcal.io.protocol`, pure: bytes
+in, records out) and the serial reader built on them."""
 
 from .protocol import (
     PROTOCOLS,
@@ -8,6 +9,10 @@ from .protocol import (
     FramedDecoder,
     RawDecoder,
     TextDecoder,
+    encode_binary,
+    encode_framed,
+    encode_raw,
+    encode_text,
     make_decoder,
 )
 
@@ -19,5 +24,9 @@ __all__ = [
     "FramedDecoder",
     "RawDecoder",
     "TextDecoder",
+    "encode_binary",
+    "encode_framed",
+    "encode_raw",
+    "encode_text",
     "make_decoder",
 ]
