@@ -191,6 +191,24 @@ def test_faults_lose_only_damaged_frames_and_never_write_a_wrong_row(tmp_path, p
         assert st.decoder.lines_skipped > 0
 
 
+def test_text_lost_digits_are_the_limit_of_a_format_without_checksum(tmp_path):
+    """Any byte lost from a text line: a lost digit makes another number that no decoder
+    can see, so wrong rows appear, but only for damaged lines; intact lines all arrive."""
+    out = tmp_path / "t.csv"
+    with device(speed=10.0, faults=sim.Faults(drop_prob=0.05, seed=3)) as dev:
+        capture(SerialReader(dev.port, protocol="text", channels=10), out, samples=500,
+                progress=None, handle_sigint=False)
+        sent = list(dev.sent)
+    rows = session_rows(out)
+    positions, wrong = align(rows, sent)
+    span = sent[positions[0]:positions[-1] + 1]
+    damaged = sum(not f.intact for f in span)
+    assert 0 < len(wrong) <= damaged
+    got = set(positions)
+    lost = [k for k in range(positions[0], positions[-1] + 1) if sent[k].intact and k not in got]
+    assert not lost
+
+
 def test_legacy_stream_corruption_costs_only_neighbouring_frames(tmp_path):
     faults = sim.Faults(garbage_prob=0.03, drop_prob=0.03, seed=5)
     out = tmp_path / "b.csv"
