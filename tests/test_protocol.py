@@ -642,3 +642,10 @@ def test_motioncal_packet_round_trip():
     bad = bytearray(pkt)
     bad[10] ^= 1
     assert P.decode_motioncal_packet(bytes(bad)) is None
+
+
+def test_docstring_examples_run():
+    import doctest
+
+    result = doctest.testmod(P, optionflags=doctest.ELLIPSIS)
+    assert result.attempted >= 14 and result.failed == 0
