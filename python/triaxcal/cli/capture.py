@@ -87,6 +87,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="pose detection: samples per averaging window (default 25)")
     p.add_argument("--hold", type=_positive_int, default=4, metavar="W",
                    help="pose detection: steady windows before a pose registers (default 4)")
+    p.add_argument("--counts-per-g", type=float, default=None, metavar="C",
+                   help="accelerometer units per g, for pose detection (default 16384; 8192 "
+                        "for raw; 1 if a text board prints g)")
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
     p.set_defaults(func=run)
@@ -95,6 +98,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.poll_hz is not None and not args.poll_hz > 0:
         raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
+    if args.counts_per_g is not None and not args.counts_per_g > 0:
+        raise CalibrationError(f"--counts-per-g must be > 0, got {args.counts_per_g}")
     channels = args.channels
     if channels is None and args.protocol != "raw":
         channels = 10
@@ -126,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.seconds,
         mode=mode,
         columns=names,
+        units_per_g=args.counts_per_g,
         window=args.window,
         hold_windows=args.hold,
         progress=None if args.quiet else out,
