@@ -47,11 +47,16 @@ def as_vector(value: Any, name: str) -> tuple[float, float, float]:
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
-def as_radius(radius: Any, *, allow_none: bool = True) -> float | None:
-    """Return ``radius`` as a positive float (or None where allowed)."""
+def as_radius(radius: Any) -> float | None:
+    """Return ``radius`` as a positive float, or None (the data's own scale)."""
     if radius is None:
-        if allow_none:
-            return None
+        return None
+    return require_radius(radius)
+
+
+def require_radius(radius: Any) -> float:
+    """Return ``radius`` as a positive float; it must be given."""
+    if radius is None:
         raise CalibrationError("radius is required: the magnitude calibrated readings must have")
     try:
         r = float(radius)

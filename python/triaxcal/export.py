@@ -655,7 +655,8 @@ def _c_temperature_fixed(fp: FixedPoint, s: str, S: str) -> list[str]:
         "    int i, k;",
         "    for (i = 0; i < 3; i++) {",
         f"        int64_t off = {s}_q_offset_poly[{k - 1}][i];",
-        f"        int64_t dq = (int64_t)((int32_t)raw[i] - {s}_q_offset[i]) * ((int64_t)1 << {fb});",
+        f"        int64_t dq = (int64_t)((int32_t)raw[i] - {s}_q_offset[i])"
+        f" * ((int64_t)1 << {fb});",
         (f"        for (k = {k - 2}; k >= 0; k--) off = ((off * dt) >> {TEMP_FRAC_BITS})"
         f" + {s}_q_offset_poly[k][i];"),
         f"        dq = dq - {s}_q_offset_frac[i] - off;",

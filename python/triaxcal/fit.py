@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from ._validate import as_points, as_radius, as_vector
+from ._validate import as_points, as_radius, as_vector, require_radius
 from .errors import CalibrationError
 
 __all__ = [
@@ -403,7 +403,7 @@ def sphere_error(points: Any, center: Any, radius: float) -> float:
     >>> tc.sphere_error([[1, 0, 0], [0, 2, 0]], (0, 0, 0), 1.0)
     3.0
     """
-    r = as_radius(radius, allow_none=False)
+    r = require_radius(radius)
     return float(_core.sphere_error(as_points(points), as_vector(center, "center"), r))
 
 
@@ -424,7 +424,7 @@ def descend_center(
     below ``min_step``. ``min_step=step`` gives the fixed-step descent. Defaults are the seed's
     (raw counts: step 1000 down to 0.01).
     """
-    r = as_radius(radius, allow_none=False)
+    r = require_radius(radius)
     d = _core.descend_center(
         as_points(points),
         r,
@@ -439,7 +439,7 @@ def descend_center(
 
 def grid_center(points: Any, radius: float, *, lo: Any, hi: Any, step: float) -> Descent:
     """Brute-force search of the cube ``[lo, hi]`` (scalars or 3-vectors) at ``step``."""
-    r = as_radius(radius, allow_none=False)
+    r = require_radius(radius)
     d = _core.grid_center(
         as_points(points), r, lo=as_vector(lo, "lo"), hi=as_vector(hi, "hi"), step=float(step)
     )

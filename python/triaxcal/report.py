@@ -486,8 +486,12 @@ def plot_report(
                   f"{rep.coverage_pct:.0f} %, {len(rep.rejected)} outliers of {rep.n}"),
         fontsize=13,
     )
-    kw_in: dict[str, Any] = {"s": 9, "c": "#1f77b4", "alpha": 0.55, "linewidths": 0, "label": "used"}
-    kw_out: dict[str, Any] = {"s": 30, "c": "#d62728", "marker": "x", "linewidths": 1.2, "label": "rejected"}
+    kw_in: dict[str, Any] = {
+        "s": 9, "c": "#1f77b4", "alpha": 0.55, "linewidths": 0, "label": "used"
+    }
+    kw_out: dict[str, Any] = {
+        "s": 30, "c": "#d62728", "marker": "x", "linewidths": 1.2, "label": "rejected"
+    }
     for col, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
         ax = fig.add_subplot(gs[0, col])
         ax.scatter(pts[keep, i], pts[keep, j], **kw_in)
@@ -550,14 +554,15 @@ def plot_report(
                   norm=mcolors.Normalize(vmin=0, vmax=max(np.nanmax(shown), 1.0)),
                   edgecolors="white", linewidth=0.6)
     ax.scatter(np.degrees(np.arctan2(cu[:, 1], cu[:, 0])), cu[:, 2], s=4, c="k", alpha=0.5)
-    for cen, ang, words in rep.empty:
+    for cen, _ang, words in rep.empty:
         lon = float(np.degrees(np.arctan2(cen[1], cen[0])))
         ax.plot(lon, cen[2], marker="*", ms=18, color="#d62728", mec="k", ls="none",
                 clip_on=False)
         ax.annotate(f"empty: {words}", (lon, cen[2]), textcoords="offset points",
                     xytext=(-8 if lon > 60 else 8, 8), ha="right" if lon > 60 else "left",
                     fontsize=9, color="#d62728",
-                    bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#d62728", "alpha": 0.9})
+                    bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#d62728",
+                          "alpha": 0.9})
     ax.set_xlim(-180, 180)
     ax.set_ylim(-1, 1)
     ax.set_xticks([-180, -90, 0, 90, 180])

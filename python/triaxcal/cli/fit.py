@@ -42,7 +42,8 @@ def parse_radius(text: str, sensor: str) -> tuple[float, str]:
     Bare numbers: accelerometer 0.5..2 -> g, 5..15 -> m/s^2, else counts; magnetometer
     10..100 -> uT, else counts; gyroscope -> deg/s.
 
-    >>> parse_radius("1g", "accel"), parse_radius("9.80665", "accel"), parse_radius("16384", "accel")
+    >>> (parse_radius("1g", "accel"), parse_radius("9.80665", "accel"),
+    ...  parse_radius("16384", "accel"))
     ((1.0, 'g'), (9.80665, 'm/s^2'), (16384.0, 'counts'))
     >>> parse_radius("48uT", "mag")
     (48.0, 'uT')
