@@ -26,6 +26,7 @@ test-python:
 
 lint:
 	$(PY) -m ruff check python tests benches
+	$(PY) -m mypy python/triaxcal --ignore-missing-imports
 	$(PY) -m mypy.stubtest triaxcal._core
 
 # Everything: the README's test command, and what CI runs.
