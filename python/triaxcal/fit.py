@@ -209,16 +209,8 @@ def fit_ellipsoid(
             points, radius=radius, max_iter=max_iter, tol=tol, method=method, debias=debias
         )
         return replace(auto.fit, model_reason=auto.reason)
-    if model not in MODELS:
-        raise CalibrationError(
-            f"unknown model {model!r}: use 'sphere' (offset only), 'axis' (offset + 3 gains), "
-            "'full' (offset + symmetric 3x3 matrix) or 'auto'"
-        )
-    if method not in METHODS:
-        raise CalibrationError(f"unknown method {method!r}: use one of {METHODS}")
-    max_iter = _as_count(max_iter, "max_iter")
+    max_iter, r = _check_options(model, method, max_iter, radius, auto_ok=True)
     pts = as_points(points)
-    r = as_radius(radius)
     d = _core.fit_ellipsoid(
         pts,
         model=model,
@@ -320,12 +312,7 @@ def fit_batch(
         ``converged`` (B,), ``iterations`` (B,), ``errors`` (B,). One bad set reports its own
         error and does not spoil the others.
     """
-    if model not in MODELS:
-        raise CalibrationError(f"unknown model {model!r}: use one of {MODELS}")
-    if method not in METHODS:
-        raise CalibrationError(f"unknown method {method!r}: use one of {METHODS}")
-    max_iter = _as_count(max_iter, "max_iter")
-    r = as_radius(radius)
+    max_iter, r = _check_options(model, method, max_iter, radius, auto_ok=False)
     if isinstance(sets, np.ndarray) and sets.ndim == 3:
         if sets.shape[2] != 3:
             raise CalibrationError(f"sets must have shape (B, N, 3), got {sets.shape}")
@@ -444,6 +431,20 @@ def grid_center(points: Any, radius: float, *, lo: Any, hi: Any, step: float) ->
         as_points(points), r, lo=as_vector(lo, "lo"), hi=as_vector(hi, "hi"), step=float(step)
     )
     return Descent._from_core(d)
+
+
+def _check_options(
+    model: str, method: str, max_iter: Any, radius: Any, *, auto_ok: bool
+) -> tuple[int, float | None]:
+    """Validate the options shared by the fits; returns (max_iter, radius)."""
+    if model not in MODELS:
+        raise CalibrationError(
+            f"unknown model {model!r}: use 'sphere' (offset only), 'axis' (offset + 3 gains), "
+            "'full' (offset + symmetric 3x3 matrix)" + (" or 'auto'" if auto_ok else "")
+        )
+    if method not in METHODS:
+        raise CalibrationError(f"unknown method {method!r}: use one of {METHODS}")
+    return _as_count(max_iter, "max_iter"), as_radius(radius)
 
 
 def _as_count(value: Any, name: str) -> int:
