@@ -182,6 +182,10 @@ class SerialReader:
         Longest wait for the reply to one request (polled binary).
     poll_interval_s : float
         Shortest time between requests (0: as fast as the board answers).
+    poll_settle_s : float, optional
+        After a full reply, wait this long and reject the reply if more bytes came (garbage
+        in front of the frame makes a reply too long). Default: three characters' time at
+        ``baud`` plus 0.5 ms.
     reconnect : bool
         Wait for a vanished port to come back (else raise :class:`DisconnectedError`).
     reconnect_timeout_s : float, optional
@@ -217,6 +221,7 @@ class SerialReader:
         garbage_s: float = 3.0,
         poll_timeout_s: float = 0.1,
         poll_interval_s: float = 0.0,
+        poll_settle_s: float | None = None,
         read_timeout_s: float = 0.05,
         reconnect: bool = True,
         reconnect_timeout_s: float | None = None,
@@ -224,14 +229,14 @@ class SerialReader:
     ) -> None:
         if protocol not in PROTOCOLS:
             raise CaptureError(f"unknown protocol {protocol!r}: use one of {', '.join(PROTOCOLS)}")
+        if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
+            raise CaptureError(f"baud must be a positive whole number, e.g. 115200; got {baud!r}")
+        self.baud = baud
         self.port_name = str(port)
         self.protocol = protocol
         self.polled = protocol == "binary" and not stream
         self.decoder = make_decoder(protocol, channels, polled=self.polled)
         self.channels = getattr(self.decoder, "channels", channels)
-        if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
-            raise CaptureError(f"baud must be a positive whole number, e.g. 115200; got {baud!r}")
-        self.baud = baud
         self.request = parse_request_byte(request_byte)
         self.switch_mode = bool(switch_mode)
         self.open_timeout_s = float(open_timeout_s)
@@ -239,6 +244,11 @@ class SerialReader:
         self.garbage_s = float(garbage_s)
         self.poll_timeout_s = float(poll_timeout_s)
         self.poll_interval_s = float(poll_interval_s)
+        # three characters' time plus a little: long enough for the rest of a reply that had
+        # garbage in front of it to show up, so that the reply is rejected as too long
+        self.poll_settle_s = 30.0 / baud + 0.0005 if poll_settle_s is None else float(
+            poll_settle_s
+        )
         self.read_timeout_s = float(read_timeout_s)
         self.reconnect = bool(reconnect)
         self.reconnect_timeout_s = reconnect_timeout_s
@@ -393,6 +403,8 @@ class SerialReader:
         t = time.time()
         self._seen(data)
         recs = self.decoder.feed(data) if data else []
+        if recs and self.poll_settle_s > 0:
+            time.sleep(self.poll_settle_s)  # let the tail of a too-long reply arrive
         extra = port.in_waiting
         if extra:  # a reply longer than one frame: garbage in it, reject the lot
             more = port.read(extra)
@@ -424,6 +436,7 @@ class SerialReader:
     def _check_health(self, got: bool) -> None:
         now = time.monotonic()
         if got:
+            self._first_bytes.clear()
             if self._warned:
                 self._event("resumed", f"{self.port_name}: data is arriving again")
             self._warned = None
