@@ -1143,6 +1143,8 @@ class SimDevice:
                     if now >= self._unplug_until:
                         self._plug()
                         self.protocol = self.boot_mode  # the board rebooted
+                        self._seq = 0
+                        self._damage_next = False
                         self._next = self._sample()
                     else:
                         time.sleep(0.005)
