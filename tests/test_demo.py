@@ -64,6 +64,27 @@ def test_demo_recovers_magnetometer_and_gyro_bias(demo):
     assert res["truth"]["accel"]["offset"] == pytest.approx(truth.accel.offset.tolist())
 
 
+def test_demo_writes_calibration_headers_and_report(demo):
+    _, out, res, _ = demo
+    import triaxcal as tc
+
+    cal = tc.Calibration.load(out / "calibration.json")
+    assert set(cal.sensors) == {"accel", "gyro", "mag"}
+    truth = sim.SimIMU(res["seed"]).truth.accel
+    # the shipped calibration maps a true 1 g reading back to 1 g
+    raw = np.array([[0.0, 0.0, 1.0]]) @ np.linalg.inv(truth.matrix).T + truth.offset
+    np.testing.assert_allclose(cal.apply(raw, sensor="accel"), [[0, 0, 1]], atol=1e-3)
+    header = (out / "triaxcal_calibration.h").read_text()
+    assert "triaxcal_accel_apply" in header and "triaxcal_mag_apply" in header
+    assert "int" in (out / "triaxcal_calibration_fixed.h").read_text()
+    assert tc.decode_motioncal((out / "motioncal.bin").read_bytes()) is not None
+    assert "warnings" in (out / "report_accel.txt").read_text()
+    png = (out / "report_accel.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+    for kind in ("json", "c", "c-fixed", "motioncal", "figure_accel", "figure_mag"):
+        assert kind in res["outputs"], kind
+
+
 def test_demo_prints_a_table_with_units(tmp_path, capsys):
     rc = main(["demo", "--out", str(tmp_path), "--quiet", "--protocol", "binary", "--seed", "2",
                "--speed", "60"])

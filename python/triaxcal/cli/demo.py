@@ -5,7 +5,9 @@ capture goes through exactly the code a real board uses (:func:`triaxcal.capture
 over :class:`triaxcal.io.serial.SerialReader`). The session CSV is then read back, still
 poses are detected (:func:`triaxcal.detect_poses`), the accelerometer and magnetometer are
 fitted (:func:`triaxcal.fit_ellipsoid`, model "full") and the gyroscope bias is averaged over
-the still poses.
+the still poses. Finally the calibration is written as a calibration file, C headers (float and
+fixed point), the MotionCal packet, and a quality report with a figure per sensor
+(:func:`triaxcal.export.write_outputs`).
 """
 
 from __future__ import annotations
@@ -20,9 +22,11 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration import Calibration, SensorCalibration
 from ..capture import CaptureResult, capture, read_session
 from ..detect import detect_poses, detect_still
 from ..errors import CalibrationError
+from ..export import write_outputs
 from ..fit import EllipsoidFit, fit_ellipsoid
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
@@ -41,11 +45,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "demo",
         help=HELP,
-        description=HELP[0].upper() + HELP[1:] + ". Writes session.csv and results.json "
-        "into --out.",
+        description=HELP[0].upper() + HELP[1:] + ". Writes session.csv, results.json, "
+        "calibration.json, C headers, motioncal.bin and report figures into --out.",
     )
     p.add_argument("--out", default="triaxcal-demo", metavar="DIR",
-                   help="folder for session.csv and results.json (default ./triaxcal-demo)")
+                   help="folder for the session, the calibration and its reports "
+                        "(default ./triaxcal-demo)")
+    p.add_argument("--no-plot", action="store_true",
+                   help="skip the report figures (they need matplotlib)")
     p.add_argument("--protocol", default="framed", choices=PROTOCOLS,
                    help="wire protocol between the simulated board and the host, streamed "
                         "(default framed)")
@@ -62,9 +69,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.speed > 0:
         raise CalibrationError(f"--speed must be > 0, got {args.speed}")
     result = run_demo(out, protocol=args.protocol, speed=args.speed, seed=args.seed,
-                      progress=None if args.quiet else sys.stderr)
+                      progress=None if args.quiet else sys.stderr, plot=not args.no_plot)
     print(result["table"])
     print(f"session: {result['session']}\nresults: {result['results']}")
+    for kind, path in result["outputs"].items():
+        print(f"{kind}: {path}")
     return 0
 
 
@@ -75,8 +84,14 @@ def run_demo(
     speed: float = 40.0,
     seed: int = 1,
     progress: Any = None,
+    plot: bool = True,
 ) -> dict[str, Any]:
-    """Run the demo into folder ``out``; returns the results dict (also in results.json)."""
+    """Run the demo into folder ``out``; returns the results dict (also in results.json).
+
+    Besides ``session.csv`` and ``results.json``, writes the calibration (``calibration.json``,
+    ``triaxcal_calibration.h``, ``triaxcal_calibration_fixed.h``, ``motioncal.bin``) and a
+    quality report per sensor (``report_<sensor>.txt`` and, with ``plot``, ``.png``).
+    """
     t_start = time.monotonic()
     imu = SimIMU(seed)
     script = globe_script(hold_s=1.0, seed=seed)
@@ -162,6 +177,29 @@ def run_demo(
         "seconds": round(time.monotonic() - t_start, 3),
         "session": str(session),
     }
+
+    # the calibration a user ships: counts in, g / deg/s / uT out
+    gyro_part = SensorCalibration(
+        offset=gyro_bias,
+        matrix=np.eye(3) / GYRO_COUNTS_PER_DPS,  # nominal sensitivity; bias from the poses
+        raw_unit="counts",
+        unit="deg/s",
+        model="bias",
+        stats={"n_samples": int(len(still))},
+        source=str(session),
+    )
+    cal = Calibration(
+        accel=SensorCalibration.from_fit(accel_fit, raw_unit="counts", unit="g",
+                                         points=means[:, a_cols], source=str(session)),
+        gyro=gyro_part,
+        mag=SensorCalibration.from_fit(mag_fit, raw_unit="counts", unit="uT",
+                                       points=means[:, m_cols], source=str(session)),
+        sensor_id=f"triaxcal-sim-seed{seed}",
+    )
+    outputs = write_outputs(
+        cal, {"accel": means[:, a_cols], "mag": means[:, m_cols]}, out, plot=plot
+    )
+    results["outputs"] = {k: str(v) for k, v in outputs.items()}
     path = out / "results.json"
     path.write_text(json.dumps(results, indent=2) + "\n")
     results["results"] = str(path)
