@@ -1,8 +1,8 @@
 //! Many data sets at once (a production line: thousands of boards), in parallel with rayon.
 //!
 //! Each set is fitted on its own with the options given (see `ellipsoid`); the sets run in
-//! parallel and each fit runs single-threaded. A bad set yields its own error and does not
-//! spoil the others.
+//! parallel and each fit runs single-threaded, without the coverage diagnostics (a batch
+//! reports no warnings). A bad set yields its own error and does not spoil the others.
 
 use crate::ellipsoid::{fit_ellipsoid, EllipsoidFit, FitOptions};
 use crate::error::{CalError, Result};

@@ -159,6 +159,9 @@ pub struct FitOptions {
     /// Correct the geometric residual for the bias that noise adds to vector lengths (see
     /// the module documentation). Off: the plain geometric least-squares fit.
     pub debias: bool,
+    /// Compute the coverage warnings (one more pass over the points). Batches, which report
+    /// no warnings, turn it off.
+    pub diagnostics: bool,
 }
 
 impl Default for FitOptions {
@@ -171,6 +174,7 @@ impl Default for FitOptions {
             method: Method::LevenbergMarquardt,
             parallel: true,
             debias: true,
+            diagnostics: true,
         }
     }
 }
@@ -410,7 +414,8 @@ fn accumulate_chunk<const P: usize>(chunk: &[[f64; 3]], k: &Kernel) -> Acc<P> {
         trw2,
         half_sigma2,
     } = *k;
-    let mut jtj = [[[0.0f64; LANES]; P]; P];
+    // upper triangle of JᵀJ, packed row by row, per lane (45 = 9 * 10 / 2 at most)
+    let mut jtj = [[0.0f64; LANES]; 45];
     let mut jtr = [[0.0f64; LANES]; P];
     let mut cost = [0.0f64; LANES];
     let mut wqs = [0.0f64; LANES];
@@ -471,32 +476,36 @@ fn accumulate_chunk<const P: usize>(chunk: &[[f64; 3]], k: &Kernel) -> Acc<P> {
                         }
                     }
                     if P == 9 {
-                        for (t, (a, b)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
-                            for l in 0..LANES {
-                                // offdiag_xy, offdiag_xz, offdiag_yz
-                                j[6 + t][l] = (v[a][l] * u[b][l] + v[b][l] * u[a][l]) * inv[l];
-                            }
+                        for l in 0..LANES {
+                            j[6][l] = (v[0][l] * u[1][l] + v[1][l] * u[0][l]) * inv[l]; // offdiag_xy
+                            j[7][l] = (v[0][l] * u[2][l] + v[2][l] * u[0][l]) * inv[l]; // offdiag_xz
+                            j[8][l] = (v[1][l] * u[2][l] + v[2][l] * u[1][l]) * inv[l];
+                            // offdiag_yz
                         }
                     }
                 }
             }
+            let mut t = 0;
             for a in 0..P {
                 for l in 0..LANES {
                     jtr[a][l] += j[a][l] * r[l];
                 }
                 for b in a..P {
                     for l in 0..LANES {
-                        jtj[a][b][l] += j[a][l] * j[b][l];
+                        jtj[t][l] += j[a][l] * j[b][l];
                     }
+                    t += 1;
                 }
             }
         },
     );
     let mut acc = Acc::<P>::zero();
+    let mut t = 0;
     for a in 0..P {
         acc.jtr[a] = jtr[a].iter().sum();
         for b in a..P {
-            acc.jtj[a][b] = jtj[a][b].iter().sum();
+            acc.jtj[a][b] = jtj[t].iter().sum();
+            t += 1;
         }
     }
     acc.cost = cost.iter().sum();
@@ -924,9 +933,9 @@ fn fit_generic<const P: usize>(
     };
     let th0 = theta_of(model, o0, &w0);
 
-    let (th, iterations, converged, acc) = if opts.method == Method::Algebraic {
+    let (th, iterations, converged, acc, final_half_sigma2) = if opts.method == Method::Algebraic {
         let acc = accumulate::<P>(points, 1, norm, model, &th0, opts.parallel, 0.0);
-        (th0, 0, true, acc)
+        (th0, 0, true, acc, 0.0)
     } else {
         // plain geometric fit, then the debiasing rounds, each started from the previous
         // solution; large inputs do all of that on a strided subsample and finish on all points
@@ -950,18 +959,24 @@ fn fit_generic<const P: usize>(
             iterations += r2.iterations;
             (r, acc) = (r2, acc2);
         }
-        (r.th, iterations, r.converged, acc)
+        (r.th, iterations, r.converged, acc, half_sigma2)
     };
 
-    // W and -W (or any sign flip of an eigenvalue) give the same residuals: take |W|.
+    // W and -W (or any sign flip of an eigenvalue) give the same residuals: take |W|
+    // (W itself when it is positive definite, the usual case).
     let w_raw = w_of(model, &th);
-    let e = SymmetricEigen::new(w_raw);
-    let abs_l = e.eigenvalues.map(f64::abs);
-    if abs_l.min() <= 1e-9 * abs_l.max() || !abs_l.iter().all(|v| v.is_finite()) {
-        return Err(not_determined(model, "a gain went to zero"));
-    }
-    let w1 = e.eigenvectors * Matrix3::from_diagonal(&abs_l) * e.eigenvectors.transpose();
-    let w1 = (w1 + w1.transpose()) * 0.5;
+    let ev = crate::geometry::sym3_eigenvalues(&w_raw);
+    let w1 = if ev[2] > 1e-9 * ev[0] && ev.iter().all(|v| v.is_finite()) {
+        w_raw
+    } else {
+        let e = SymmetricEigen::new(w_raw);
+        let abs_l = e.eigenvalues.map(f64::abs);
+        if abs_l.min() <= 1e-9 * abs_l.max() || !abs_l.iter().all(|v| v.is_finite()) {
+            return Err(not_determined(model, "a gain went to zero"));
+        }
+        let w = e.eigenvectors * Matrix3::from_diagonal(&abs_l) * e.eigenvectors.transpose();
+        (w + w.transpose()) * 0.5
+    };
 
     // conditioning and standard errors in normalised coordinates
     let jtj = full_matrix(&acc);
@@ -1046,13 +1061,18 @@ fn fit_generic<const P: usize>(
     }
     // coverage of the sphere by the calibrated directions, and the plain RMS of
     // |calibrated| - radius (one more streaming pass)
-    let cov = coverage_pass(points, norm, &w1, &o);
-    let rms = (cov.ss / n as f64).sqrt() * radius;
-    warnings.extend(bounds::coverage_warnings(
-        &cov.faces,
-        cov.min_spread,
-        &cov.weak,
-    ));
+    let rms = if opts.diagnostics || final_half_sigma2 != 0.0 {
+        let cov = coverage_pass(points, norm, &w1, &o);
+        warnings.extend(bounds::coverage_warnings(
+            &cov.faces,
+            cov.min_spread,
+            &cov.weak,
+        ));
+        (cov.ss / n as f64).sqrt() * radius
+    } else {
+        // the last accumulation was at these parameters with the plain residual
+        (acc.cost / n as f64).sqrt() * radius
+    };
     let mut m = [[0.0; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
@@ -1173,13 +1193,19 @@ fn coverage_pass_impl(
         sum(&t[5]),
         sum(&t[2]),
     );
-    let e = SymmetricEigen::new(tm);
-    let i = e.eigenvalues.imin();
+    let min_spread = crate::geometry::sym3_eigenvalues(&tm)[2];
+    // the weakest direction is only needed for a warning
+    let weak = if min_spread < bounds::WARN_MIN_SPREAD {
+        let e = SymmetricEigen::new(tm);
+        e.eigenvectors.column(e.eigenvalues.imin()).into_owned()
+    } else {
+        Vector3::z()
+    };
     Coverage {
         ss: ss.iter().sum(),
         faces,
-        min_spread: e.eigenvalues[i],
-        weak: e.eigenvectors.column(i).into_owned(),
+        min_spread,
+        weak,
     }
 }
 

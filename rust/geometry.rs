@@ -5,7 +5,7 @@
 //! line or a plane from one that can determine a sphere or an ellipsoid.
 
 use crate::error::{CalError, Result};
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
 /// Centroid, RMS distance from it and principal variances of a point cloud.
 #[derive(Debug, Clone, Copy)]
@@ -56,21 +56,34 @@ pub fn spread(points: &[[f64; 3]]) -> Spread {
     );
     let mean = Vector3::new(p0[0] + m[0], p0[1] + m[1], p0[2] + m[2]);
     let scale = cov.trace().max(0.0).sqrt();
-    let mut variances: Vec<f64> = SymmetricEigen::new(cov)
-        .eigenvalues
-        .iter()
-        .copied()
-        .collect();
-    variances.sort_by(|a, b| b.total_cmp(a));
+    let v = sym3_eigenvalues(&cov);
     Spread {
         mean,
         scale,
-        variances: [
-            variances[0].max(0.0),
-            variances[1].max(0.0),
-            variances[2].max(0.0),
-        ],
+        variances: [v[0].max(0.0), v[1].max(0.0), v[2].max(0.0)],
     }
+}
+
+/// Eigenvalues of a symmetric 3x3 matrix, largest first, in closed form (the trigonometric
+/// solution of the characteristic cubic). Absolute accuracy: a few ulps of the largest
+/// eigenvalue, except that two nearly equal eigenvalues are only good to about 1e-8 of it
+/// (acos is ill-conditioned there); the callers compare ratios with thresholds far from both.
+pub fn sym3_eigenvalues(a: &Matrix3<f64>) -> [f64; 3] {
+    let p1 = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
+    let q = a.trace() / 3.0;
+    let p2 = (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    if !(p > 0.0) {
+        let mut d = [a[(0, 0)], a[(1, 1)], a[(2, 2)]];
+        d.sort_by(|x, y| y.total_cmp(x));
+        return d;
+    }
+    let b = (a - Matrix3::identity() * q) / p;
+    let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
+    let phi = r.acos() / 3.0;
+    let e1 = q + 2.0 * p * phi.cos();
+    let e3 = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+    [e1, 3.0 * q - e1 - e3, e3]
 }
 
 /// Fails unless the points span all three dimensions.
@@ -113,6 +126,33 @@ pub fn check_three_dimensional(points: &[[f64; 3]], what: &str) -> Result<Spread
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::SymmetricEigen;
+
+    #[test]
+    fn closed_form_eigenvalues_match_nalgebra() {
+        let ms = [
+            Matrix3::new(2.0, 0.3, -0.1, 0.3, 1.0, 0.2, -0.1, 0.2, 0.5),
+            Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1e-20),
+            Matrix3::new(4.0, 1.0, 0.0, 1.0, 4.0, 0.0, 0.0, 0.0, 0.0),
+            Matrix3::identity() * 3.0,
+        ];
+        for m in ms {
+            let mut want: Vec<f64> = SymmetricEigen::new(m).eigenvalues.iter().copied().collect();
+            want.sort_by(|a, b| b.total_cmp(a));
+            let got = sym3_eigenvalues(&m);
+            for k in 0..3 {
+                assert!(
+                    (got[k] - want[k]).abs() < 1e-8 * want[0].abs().max(1.0),
+                    "{got:?} {want:?}"
+                );
+            }
+            // the smallest one is what the flatness checks use: good to ulps of the largest
+            assert!(
+                (got[2] - want[2]).abs() < 1e-14 * want[0].abs(),
+                "{got:?} {want:?}"
+            );
+        }
+    }
 
     #[test]
     fn detects_line_and_plane() {

@@ -72,6 +72,7 @@ fn options(
 ) -> PyResult<FitOptions> {
     Ok(FitOptions {
         debias,
+        diagnostics: true,
         model: py_result(Model::parse(model))?,
         radius,
         max_iter,
