@@ -414,8 +414,7 @@ fn accumulate_chunk<const P: usize>(chunk: &[[f64; 3]], k: &Kernel) -> Acc<P> {
         trw2,
         half_sigma2,
     } = *k;
-    // upper triangle of JᵀJ, packed row by row, per lane (45 = 9 * 10 / 2 at most)
-    let mut jtj = [[0.0f64; LANES]; 45];
+    let mut jtj = [[[0.0f64; LANES]; P]; P];
     let mut jtr = [[0.0f64; LANES]; P];
     let mut cost = [0.0f64; LANES];
     let mut wqs = [0.0f64; LANES];
@@ -485,27 +484,23 @@ fn accumulate_chunk<const P: usize>(chunk: &[[f64; 3]], k: &Kernel) -> Acc<P> {
                     }
                 }
             }
-            let mut t = 0;
             for a in 0..P {
                 for l in 0..LANES {
                     jtr[a][l] += j[a][l] * r[l];
                 }
                 for b in a..P {
                     for l in 0..LANES {
-                        jtj[t][l] += j[a][l] * j[b][l];
+                        jtj[a][b][l] += j[a][l] * j[b][l];
                     }
-                    t += 1;
                 }
             }
         },
     );
     let mut acc = Acc::<P>::zero();
-    let mut t = 0;
     for a in 0..P {
         acc.jtr[a] = jtr[a].iter().sum();
         for b in a..P {
-            acc.jtj[a][b] = jtj[t].iter().sum();
-            t += 1;
+            acc.jtj[a][b] = jtj[a][b].iter().sum();
         }
     }
     acc.cost = cost.iter().sum();
