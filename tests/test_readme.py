@@ -28,7 +28,7 @@ def test_quickstart_runs_and_recovers_the_offsets(capsys):
 
 def test_readme_gives_the_two_fresh_machine_commands():
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    assert "pip install . && triaxcal demo" in text
+    assert "pip install '.[plot]' && triaxcal demo" in text
     assert "make test" in text
     ci = (ROOT / ".ci" / "run").read_text()
     assert "make test" in ci

@@ -74,6 +74,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"session: {result['session']}\nresults: {result['results']}")
     for kind, path in result["outputs"].items():
         print(f"{kind}: {path}")
+    if not args.no_plot and not any(k.startswith("figure_") for k in result["outputs"]):
+        print("report figures skipped: matplotlib is not installed "
+              "(pip install 'triaxcal[plot]')")
     return 0
 
 
