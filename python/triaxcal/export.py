@@ -282,25 +282,8 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
         if part.temperature is not None:
             code += _c_temperature_float(part, s, S)
         code.append("")
-    head = _header_comment(cal, "Calibration header (float)", comment)
-    return "\n".join(
-        [
-            head,
-            f"#ifndef {guard}",
-            f"#define {guard}",
-            "",
-            "#ifndef TRIAXCAL_UNUSED",
-            "#if defined(__GNUC__)",
-            "#define TRIAXCAL_UNUSED __attribute__((unused))",
-            "#else",
-            "#define TRIAXCAL_UNUSED",
-            "#endif",
-            "#endif",
-            "",
-            *code,
-            f"#endif /* {guard} */",
-            "",
-        ]
+    return _wrap_header(
+        _header_comment(cal, "Calibration header (float)", comment), guard, code, includes=()
     )
 
 
@@ -588,15 +571,26 @@ def c_fixed_header(
                 "offset/gain polynomials in Q24 per degC^k (Horner, int64_t)"
             )
         code.append("")
-    head = _header_comment(cal, "Calibration header (fixed point)", comment)
+    return _wrap_header(
+        _header_comment(cal, "Calibration header (fixed point)", comment),
+        guard,
+        code,
+        includes=("<stdint.h>",),
+    )
+
+
+def _wrap_header(head: str, guard: str, code: list[str], *, includes: tuple[str, ...]) -> str:
+    """The parts every generated header shares: comment, include guard, includes, the
+    ``TRIAXCAL_UNUSED`` attribute for the static tables, then ``code``."""
+    inc = [f"#include {i}" for i in includes]
     return "\n".join(
         [
             head,
             f"#ifndef {guard}",
             f"#define {guard}",
             "",
-            "#include <stdint.h>",
-            "",
+            *inc,
+            *([""] if inc else []),
             "#ifndef TRIAXCAL_UNUSED",
             "#if defined(__GNUC__)",
             "#define TRIAXCAL_UNUSED __attribute__((unused))",
