@@ -14,25 +14,51 @@ def as_points(points: Any, name: str = "points", min_rows: int = 0) -> np.ndarra
 
     Accepts any array-like of real numbers (int16 straight from a sensor is fine). Raises
     :class:`CalibrationError` for wrong shapes or dtypes, with a message saying what to pass.
+    NaN and inf are left for the caller (the Rust core names the first bad point).
     """
+    return as_samples(points, name, channels="xyz", finite=False, min_rows=min_rows)
+
+
+def as_samples(
+    samples: Any,
+    name: str = "samples",
+    *,
+    channels: str = "xyz",
+    finite: bool = True,
+    min_rows: int = 0,
+) -> np.ndarray:
+    """Return ``samples`` as a C-contiguous float64 (N, K) array, one row per reading.
+
+    ``channels="xyz"`` requires exactly 3 columns; ``"xyz+"`` at least 3 (x, y, z first, more
+    channels after). With ``finite``, a NaN or inf raises :class:`NonFiniteError` naming the
+    first bad row. Every failure is a :class:`CalibrationError` saying what to pass instead.
+    """
+    exact = channels == "xyz"
+    want = "(N, 3), one row of x, y, z per reading" if exact else (
+        "(N, K) with K >= 3 channels (x, y, z first)"
+    )
     try:
-        arr = np.asarray(points)
+        arr = np.asarray(samples)
     except (ValueError, TypeError) as exc:  # ragged lists and the like
         raise CalibrationError(
-            f"{name} must be an (N, 3) array of numbers; could not convert it ({exc})"
+            f"{name} must be an array of shape {want}; could not convert it ({exc})"
         ) from None
     if arr.dtype.kind not in "iuf":
         raise CalibrationError(
             f"{name} must hold real numbers (integer or float), got dtype {arr.dtype}; "
             "convert text columns with np.asarray(x, dtype=float) first"
         )
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise CalibrationError(
-            f"{name} must have shape (N, 3), one row of x, y, z per reading; got shape {arr.shape}"
-        )
+    if arr.ndim != 2 or (arr.shape[1] != 3 if exact else arr.shape[1] < 3):
+        raise CalibrationError(f"{name} must have shape {want}; got shape {arr.shape}")
     if arr.shape[0] < min_rows:
         raise CalibrationError(f"{name} needs at least {min_rows} rows, got {arr.shape[0]}")
-    return np.ascontiguousarray(arr, dtype=np.float64)
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if finite and not np.isfinite(arr).all():
+        bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
+        raise NonFiniteError(
+            f"{name} contains NaN or inf (first at row {bad}); drop or repair those rows first"
+        )
+    return arr
 
 
 def as_vector(value: Any, name: str) -> tuple[float, float, float]:

@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CalibrationError, NonFiniteError
+from ._validate import as_samples
+from .errors import CalibrationError
 
 __all__ = [
     "Pose",
@@ -110,26 +111,9 @@ class PoseDetection:
 
 
 def _as_samples(samples: Any, name: str = "samples", allow_empty: bool = True) -> np.ndarray:
-    try:
-        arr = np.asarray(samples)
-    except (ValueError, TypeError) as exc:
-        raise CalibrationError(
-            f"{name} must be an (N, K) array of numbers, K >= 3 ({exc})"
-        ) from None
-    if arr.dtype.kind not in "iuf":
-        raise CalibrationError(f"{name} must hold real numbers, got dtype {arr.dtype}")
-    if arr.ndim != 2 or arr.shape[1] < 3:
-        raise CalibrationError(
-            f"{name} must have shape (N, K) with K >= 3 channels (x, y, z first); got {arr.shape}"
-        )
+    arr = as_samples(samples, name, channels="xyz+", finite=True)
     if not allow_empty and arr.shape[0] == 0:
         raise CalibrationError(f"{name} is empty: record some samples first")
-    arr = np.ascontiguousarray(arr, dtype=np.float64)
-    if not np.isfinite(arr).all():
-        bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
-        raise NonFiniteError(
-            f"{name} contains NaN or inf (first at row {bad}); drop or repair those rows first"
-        )
     return arr
 
 

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ._validate import as_samples
 from .detect import Rejection, detect_poses, detect_still
 from .errors import CalibrationError
 
@@ -50,22 +51,7 @@ def _ro(a: Any) -> np.ndarray:
 
 
 def _as_rate(gyro: Any, name: str = "gyro") -> np.ndarray:
-    try:
-        arr = np.asarray(gyro)
-    except (ValueError, TypeError) as exc:
-        raise CalibrationError(f"{name} must be an (N, 3) array of numbers ({exc})") from None
-    if arr.dtype.kind not in "iuf":
-        raise CalibrationError(f"{name} must hold real numbers, got dtype {arr.dtype}")
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise CalibrationError(
-            f"{name} must have shape (N, 3), one row per sample; got {arr.shape}"
-        )
-    arr = np.ascontiguousarray(arr, dtype=np.float64)
-    if not np.isfinite(arr).all():
-        bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
-        raise CalibrationError(
-            f"{name} contains NaN or inf (first at row {bad}); repair or drop it"
-        )
+    arr = as_samples(gyro, name, finite=True)
     if arr.shape[0] < 2:
         raise CalibrationError(f"{name} needs at least 2 samples, got {arr.shape[0]}")
     return arr

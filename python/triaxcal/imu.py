@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ._validate import as_samples
 from .detect import detect_still
 from .errors import CalibrationError
 from .fit import fit_ellipsoid
@@ -252,24 +253,6 @@ def _lm(problem: _GyroProblem, m0: np.ndarray, max_iter: int, tol: float) -> tup
     return x.reshape(3, 3), iters
 
 
-def _as_triad(x: Any, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except (ValueError, TypeError) as exc:
-        raise CalibrationError(f"{name} must be an (N, 3) array of numbers ({exc})") from None
-    if arr.dtype.kind not in "iuf":
-        raise CalibrationError(f"{name} must hold real numbers, got dtype {arr.dtype}")
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise CalibrationError(f"{name} must have shape (N, 3); got {arr.shape}")
-    arr = np.ascontiguousarray(arr, dtype=np.float64)
-    if not np.isfinite(arr).all():
-        bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
-        raise CalibrationError(
-            f"{name} contains NaN or inf (first at row {bad}); repair or drop it"
-        )
-    return arr
-
-
 def calibrate_imu(
     acc: Any,
     gyro: Any,
@@ -334,8 +317,8 @@ def calibrate_imu(
         Wrong shapes, NaN, no initial rest, too few still poses, moves too small, or rotations
         that leave a gyro axis unexcited; the message says which.
     """
-    a = _as_triad(acc, "acc")
-    g = _as_triad(gyro, "gyro")
+    a = as_samples(acc, "acc")
+    g = as_samples(gyro, "gyro")
     if a.shape[0] != g.shape[0]:
         raise CalibrationError(
             f"acc has {a.shape[0]} rows, gyro {g.shape[0]}: sample them together"
