@@ -148,7 +148,7 @@ def test_missing_part_and_bad_raw():
 
 
 def test_from_temperature_model_matches_the_model():
-    temperature = pytest.importorskip("triaxcal.temperature")
+    temperature = pytest.importorskip("triaxcal.methods.temperature")
     rng = np.random.default_rng(7)
     n = 600
     t = np.linspace(10.0, 50.0, n)

@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 from triaxcal import sim
-from triaxcal.capture import read_session
 from triaxcal.cli import main
+from triaxcal.io.capture import read_session
 
 
 @pytest.fixture(scope="module")

@@ -24,13 +24,12 @@ import numpy as np
 import pytest
 import serial
 import triaxcal
+from triaxcal.io.motioncal import encode_motioncal, parse_motioncal_echo
 from triaxcal.io.protocol import (
     BinaryDecoder,
     FramedDecoder,
     RawDecoder,
     TextDecoder,
-    encode_motioncal_packet,
-    parse_cal_lines,
 )
 
 pytestmark = pytest.mark.qemu
@@ -239,15 +238,17 @@ def test_motioncal_packet_is_echoed(board):
     board.quiet()
     accel, gyro, mag = [0.125, -0.25, 0.5], [1.5, -2.0, 3.25], [10.5, -20.25, 30.0]
     field, soft = 48.5, [1.01, 0.99, 1.02, 0.01, -0.02, 0.03]
-    packet = encode_motioncal_packet(accel, gyro, mag, field, soft)
+    xx, yy, zz, xy, xz, yz = soft
+    si = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
+    packet = encode_motioncal(accel_offset=accel, gyro_offset=gyro, mag_offset=mag, field=field,
+                              soft_iron=si)
     assert len(packet) == 68
     board.port.write(packet)
     reply = board.read_until(b"Cal2:", timeout_s=5) + board.read_until(b"\r\n", timeout_s=2)
-    cal = parse_cal_lines(reply)
-    assert "Cal1" in cal and "Cal2" in cal, reply
-    assert cal["Cal1"] == pytest.approx([*accel, *gyro, *mag, field], abs=1e-4)
-    xx, yy, zz, xy, xz, yz = soft
-    assert cal["Cal2"] == pytest.approx([xx, xy, xz, xy, yy, yz, xz, yz, zz], abs=1e-4)
+    echo = parse_motioncal_echo(reply)
+    assert echo is not None, reply
+    assert echo[0] == pytest.approx([*accel, *gyro, *mag, field], abs=1e-4)
+    assert echo[1] == pytest.approx([xx, xy, xz, xy, yy, yz, xz, yz, zz], abs=1e-4)
     assert re.search(rb"Cal1:(-?\d+\.\d{4},){9}-?\d+\.\d{4}\r\n", reply), reply
 
     # a packet with a bad CRC gets no answer, and the device still answers requests

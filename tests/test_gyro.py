@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from _realdata import load_ferraris_session, load_gearvr, load_sunsided
-from triaxcal import gyro as tg
+from triaxcal.methods import gyro as tg
 from triaxcal.sim import SimIMU, rotation_script
 
 RPM33 = 2 * math.pi * (100 / 3) / 60  # rad/s
@@ -155,6 +155,6 @@ def test_turntable_rejects_unusable_input(realdata):
 def test_docstrings_run():
     import doctest
 
-    import triaxcal.gyro as mod
+    import triaxcal.methods.gyro as mod
 
     assert doctest.testmod(mod, raise_on_error=True).attempted > 0

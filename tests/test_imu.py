@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from _realdata import load_ferraris_session, load_imutk_xsens
-from triaxcal.imu import rotate_gravity
+from triaxcal.methods.imu import rotate_gravity
 from triaxcal.sim import Script, SimIMU, rotvec_to_matrix
 
 # The maker's calibration of the imu_tk Xsens MTi, as printed by the authors' calibrate.m

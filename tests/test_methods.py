@@ -168,6 +168,6 @@ def test_six_position_agrees_with_ferraris_on_real_faces(realdata):
 def test_docstrings_run():
     import doctest
 
-    import triaxcal.methods as mod
+    import triaxcal.methods.static as mod
 
     assert doctest.testmod(mod, raise_on_error=True).attempted > 0

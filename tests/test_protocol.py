@@ -13,10 +13,12 @@ import os
 import random
 import struct
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from triaxcal import CalibrationError
+from triaxcal.io import motioncal as M
 from triaxcal.io import protocol as P
 from triaxcal.io.protocol import (
     MAX_LINE_BYTES,
@@ -623,25 +625,21 @@ def test_encoders_check_their_input():
 
 
 def test_motioncal_packet_round_trip():
-    pkt = P.encode_motioncal_packet(
-        [0.1, -0.2, 0.3],
-        [1, 2, 3],
-        [10.5, -20.25, 30.0],
-        48.5,
-        [1.01, 0.99, 1.02, 0.01, -0.02, 0.03],
-    )
-    assert len(pkt) == P.MOTIONCAL_PACKET_LEN and pkt[:2] == bytes([117, 84])
-    cal = P.decode_motioncal_packet(pkt)
-    assert cal is not None
-    lines = P.format_cal_lines(cal)
+    soft = [[1.01, 0.01, -0.02], [0.01, 0.99, 0.03], [-0.02, 0.03, 1.02]]
+    pkt = M.encode_motioncal(accel_offset=[0.1, -0.2, 0.3], gyro_offset=[1, 2, 3],
+                             mag_offset=[10.5, -20.25, 30.0], field=48.5, soft_iron=soft)
+    assert len(pkt) == M.MOTIONCAL_SIZE and pkt[:2] == bytes([117, 84])
+    cal = M.decode_motioncal(pkt)
+    lines = M.format_cal_lines(cal)
     assert lines.startswith(b"Cal1:0.1000,-0.2000,0.3000,1.0000,2.0000,3.0000,10.5000,-20.2500,")
-    parsed = P.parse_cal_lines(b"noise\r\n" + lines)
-    assert parsed["Cal1"][9] == pytest.approx(48.5)
-    soft = (1.01, 0.01, -0.02, 0.01, 0.99, 0.03, -0.02, 0.03, 1.02)
-    assert parsed["Cal2"] == pytest.approx(soft, abs=1e-4)
+    parsed = M.parse_motioncal_echo(b"noise\r\n" + lines)
+    assert parsed is not None
+    assert parsed[0][9] == pytest.approx(48.5)
+    assert parsed[1] == pytest.approx(np.ravel(soft), abs=1e-4)
     bad = bytearray(pkt)
     bad[10] ^= 1
-    assert P.decode_motioncal_packet(bytes(bad)) is None
+    with pytest.raises(CalibrationError, match="CRC"):
+        M.decode_motioncal(bytes(bad))
 
 
 def test_docstring_examples_run():

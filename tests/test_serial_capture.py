@@ -16,7 +16,9 @@ import numpy as np
 import pytest
 import serial
 from triaxcal import sim
-from triaxcal.capture import (
+from triaxcal.cli import main
+from triaxcal.errors import CalibrationError
+from triaxcal.io.capture import (
     SessionWriter,
     capture,
     channel_names,
@@ -24,9 +26,7 @@ from triaxcal.capture import (
     read_session,
     suggest_turn,
 )
-from triaxcal.cli import main
-from triaxcal.errors import CalibrationError
-from triaxcal.io.protocol import encode_motioncal_packet, parse_cal_lines
+from triaxcal.io.motioncal import encode_motioncal, parse_motioncal_echo
 from triaxcal.io.serial import (
     CaptureError,
     GarbageError,
@@ -387,13 +387,15 @@ def test_garbage_only_stream_is_reported_quickly(tmp_path):
 
 def test_motioncal_packet_is_echoed_and_mode_bytes_switch():
     with device(speed=10.0) as dev, serial.Serial(dev.port, 115200, timeout=1) as port:
-        pkt = encode_motioncal_packet([0.1, -0.2, 0.3], [1, 2, 3], [10, -20, 30], 48.5,
-                                      [1.01, 0.99, 1.02, 0.01, -0.02, 0.03])
+        soft = [[1.01, 0.01, -0.02], [0.01, 0.99, 0.03], [-0.02, 0.03, 1.02]]
+        pkt = encode_motioncal(accel_offset=[0.1, -0.2, 0.3], gyro_offset=[1, 2, 3],
+                               mag_offset=[10, -20, 30], field=48.5, soft_iron=soft)
         port.write(pkt)
         time.sleep(0.2)
-        cal = parse_cal_lines(port.read(port.in_waiting))
-        assert cal["Cal1"] == pytest.approx((0.1, -0.2, 0.3, 1, 2, 3, 10, -20, 30, 48.5), abs=1e-4)
-        assert cal["Cal2"] == pytest.approx(
+        cal = parse_motioncal_echo(port.read(port.in_waiting))
+        assert cal is not None
+        assert cal[0] == pytest.approx((0.1, -0.2, 0.3, 1, 2, 3, 10, -20, 30, 48.5), abs=1e-4)
+        assert cal[1] == pytest.approx(
             (1.01, 0.01, -0.02, 0.01, 0.99, 0.03, -0.02, 0.03, 1.02), abs=1e-4)
         # a packet with a bad CRC is ignored
         port.write(pkt[:-1] + bytes([pkt[-1] ^ 1]))

@@ -133,6 +133,6 @@ def test_sunsided_gyro_offset_against_its_temperature_channel(realdata):
 def test_docstrings_run():
     import doctest
 
-    import triaxcal.temperature as mod
+    import triaxcal.methods.temperature as mod
 
     assert doctest.testmod(mod, raise_on_error=True).attempted > 0

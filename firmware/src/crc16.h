@@ -1,4 +1,4 @@
-/* CRC-16 variants used on the wire (see docs/TEAM.md). */
+/* CRC-16 variants used on the wire (see firmware/README.md). */
 #ifndef TRIAXCAL_CRC16_H
 #define TRIAXCAL_CRC16_H
 

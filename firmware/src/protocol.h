@@ -1,4 +1,4 @@
-/* Device side of the triaxcal wire protocols (docs/TEAM.md), independent of the hardware:
+/* Device side of the triaxcal wire protocols (firmware/README.md), independent of the hardware:
  * every byte goes out through the writer set with proto_set_writer(), every received byte
  * comes in through proto_feed(). Shared by the avr-libc firmware and the Arduino sketch.
  *

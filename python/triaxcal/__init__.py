@@ -40,7 +40,7 @@ from .fit import (
     grid_center,
     sphere_error,
 )
-from .gyro import (
+from .methods.gyro import (
     GyroBias,
     GyroGains,
     Rotation,
@@ -50,13 +50,13 @@ from .gyro import (
     gyro_bias,
     gyro_gains,
 )
-from .imu import (
+from .methods.imu import (
     ImuCalibration,
     SweepStep,
     TriadCalibration,
     calibrate_imu,
 )
-from .methods import (
+from .methods.static import (
     FerrarisCalibration,
     SixPosition,
     TiltRig,
@@ -64,9 +64,9 @@ from .methods import (
     six_position,
     tilt_rig,
 )
+from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
 from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
-from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
 
 __all__ = [
     "fit_temperature",

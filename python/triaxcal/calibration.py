@@ -374,7 +374,7 @@ class SensorCalibration:
         source: str | None = None,
         input_sha256: str | None = None,
     ) -> SensorCalibration:
-        """Build a part from a :class:`triaxcal.temperature.TemperatureModel`.
+        """Build a part from a :class:`triaxcal.methods.temperature.TemperatureModel`.
 
         That model reads ``calibrated = inv(S(T)) @ (raw - offset(T))`` with polynomial
         ``offset(T)`` (``offset_coef``) and sensitivity ``S(T)`` (``sens_coef``). Here:

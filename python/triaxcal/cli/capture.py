@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..capture import capture, channel_names
 from ..errors import CalibrationError
+from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
 

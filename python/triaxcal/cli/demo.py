@@ -1,7 +1,7 @@
 """``triaxcal demo``: capture from a simulated board, fit, and compare with the truth.
 
 The simulated board (:class:`triaxcal.sim.SimDevice`) runs on a pseudo-terminal, and the
-capture goes through exactly the code a real board uses (:func:`triaxcal.capture.capture`
+capture goes through exactly the code a real board uses (:func:`triaxcal.io.capture.capture`
 over :class:`triaxcal.io.serial.SerialReader`). The session CSV is then read back, still
 poses are detected (:func:`triaxcal.detect_poses`), the accelerometer and magnetometer are
 fitted (:func:`triaxcal.fit_ellipsoid`, model "full") and the gyroscope bias is averaged over
@@ -23,11 +23,11 @@ from typing import Any
 import numpy as np
 
 from ..calibration import Calibration, SensorCalibration
-from ..capture import CaptureResult, capture, read_session
 from ..detect import detect_poses, detect_still
 from ..errors import CalibrationError
 from ..export import write_outputs
 from ..fit import EllipsoidFit, fit_ellipsoid
+from ..io.capture import CaptureResult, capture, read_session
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
 from ..sim import GYRO_COUNTS_PER_DPS, SensorTruth, SimDevice, SimIMU, globe_script

@@ -25,7 +25,8 @@ from ..calibration import SENSORS, Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..fit import MODELS
 
-#: Default column names per sensor (the device channel order of docs/TEAM.md).
+#: Default column names per sensor (the device channel order,
+#: :data:`triaxcal.io.protocol.CHANNELS_10`).
 SENSOR_COLUMNS = {"accel": ("ax", "ay", "az"), "gyro": ("gx", "gy", "gz"),
                   "mag": ("mx", "my", "mz")}
 #: Default radius per sensor when --radius is not given (None: keep the data's own scale).

@@ -24,9 +24,7 @@ Four protocols (``PROTOCOLS``), all carrying K signed 16-bit counts per record:
 Malformed input is skipped and counted in the decoder's :class:`DecoderStats`; decoders never
 raise on any bytes, and no decoder buffers more than a bounded number of bytes.
 
-Also here: the MotionCal calibration packet that the firmware and the simulator answer with
-``Cal1:``/``Cal2:`` lines (:func:`encode_motioncal_packet`, :func:`decode_motioncal_packet`,
-:func:`format_cal_lines`, :func:`parse_cal_lines`).
+The MotionCal calibration packet a host sends to a board is :mod:`triaxcal.io.motioncal`.
 """
 
 from __future__ import annotations
@@ -42,8 +40,9 @@ from typing import Any, Union
 from ..errors import CalibrationError
 
 __all__ = [
+    "CHANNELS_7",
+    "CHANNELS_10",
     "MAX_LINE_BYTES",
-    "MOTIONCAL_PACKET_LEN",
     "PROTOCOLS",
     "RAW_SCALES",
     "REQUEST_BYTE",
@@ -56,18 +55,19 @@ __all__ = [
     "cobs_encode",
     "crc16_ccitt",
     "crc16_modbus",
-    "decode_motioncal_packet",
     "encode_binary",
     "encode_framed",
-    "encode_motioncal_packet",
     "encode_raw",
     "encode_text",
-    "format_cal_lines",
     "make_decoder",
-    "parse_cal_lines",
 ]
 
 PROTOCOLS = ("binary", "framed", "text", "raw")
+
+#: Channel names in device order: 10 channels (with magnetometer; the simulator) and 7 (the
+#: AVR firmware's MPU-6050, no magnetometer). All int16 counts.
+CHANNELS_10 = ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp")
+CHANNELS_7 = ("ax", "ay", "az", "gx", "gy", "gz", "temp")
 
 #: Request byte of the polled legacy protocol (``!``); the firmware answers it in any mode.
 REQUEST_BYTE = b"!"
@@ -81,10 +81,6 @@ MAX_LINE_BYTES = 1024
 
 #: Most channels a frame may carry (bounds the bytes buffered by the binary decoders).
 MAX_CHANNELS = 64
-
-#: Length of a MotionCal calibration packet: 2 signature bytes, 16 float32, CRC-16.
-MOTIONCAL_PACKET_LEN = 68
-MOTIONCAL_SIGNATURE = bytes([117, 84])
 
 _TERM = 0x0A
 _I16_MIN, _I16_MAX = -32768, 32767
@@ -989,81 +985,3 @@ def make_decoder(protocol: str, channels: int | None, *, polled: bool = False) -
             f"Raw: lines carry 9 values (ax ay az gx gy gz mx my mz), got channels={channels}"
         )
     return RawDecoder()
-
-
-# ------------------------------------------------------------------- MotionCal calibration
-
-def encode_motioncal_packet(
-    accel: Sequence[float],
-    gyro: Sequence[float],
-    mag: Sequence[float],
-    field: float,
-    soft_iron: Sequence[float],
-) -> bytes:
-    """The 68-byte calibration packet MotionCal sends to a board.
-
-    Bytes 117, 84; 16 float32 LE: accel offsets[3], gyro offsets[3], mag hard iron uT[3],
-    field uT, soft iron's 6 unique terms ``[xx, yy, zz, xy, xz, yz]``; CRC-16/MODBUS LE of the
-    first 66 bytes.
-
-    Examples
-    --------
-    >>> p = encode_motioncal_packet([0] * 3, [0] * 3, [0] * 3, 50.0, [1, 1, 1, 0, 0, 0])
-    >>> len(p), p[:2]
-    (68, b'uT')
-    """
-    floats = [*accel, *gyro, *mag, field, *soft_iron]
-    if len(floats) != 16 or len(list(accel)) != 3 or len(list(soft_iron)) != 6:
-        raise CalibrationError(
-            "a MotionCal packet needs accel[3], gyro[3], mag[3], field and soft_iron[6]"
-        )
-    body = MOTIONCAL_SIGNATURE + struct.pack("<16f", *[float(f) for f in floats])
-    return body + struct.pack("<H", crc16_modbus(body))
-
-
-def decode_motioncal_packet(packet: bytes) -> dict[str, Any] | None:
-    """Parse a MotionCal packet; ``None`` if the signature, length or CRC is wrong.
-
-    Returns a dict with ``accel``, ``gyro``, ``mag`` (3 floats each), ``field`` and
-    ``soft_iron`` (the 3x3 matrix as 3 row tuples).
-    """
-    p = bytes(packet)
-    if len(p) != MOTIONCAL_PACKET_LEN or p[:2] != MOTIONCAL_SIGNATURE:
-        return None
-    if crc16_modbus(p[:66]) != struct.unpack_from("<H", p, 66)[0]:
-        return None
-    f = struct.unpack_from("<16f", p, 2)
-    xx, yy, zz, xy, xz, yz = f[10:16]
-    return {
-        "accel": tuple(f[0:3]),
-        "gyro": tuple(f[3:6]),
-        "mag": tuple(f[6:9]),
-        "field": f[9],
-        "soft_iron": ((xx, xy, xz), (xy, yy, yz), (xz, yz, zz)),
-    }
-
-
-def format_cal_lines(cal: dict[str, Any]) -> bytes:
-    """The ``Cal1:``/``Cal2:`` echo of a decoded packet, 4 decimals, ``\\r\\n`` line ends."""
-    one = [*cal["accel"], *cal["gyro"], *cal["mag"], cal["field"]]
-    two = [v for row in cal["soft_iron"] for v in row]
-    text = "Cal1:" + ",".join(f"{v:.4f}" for v in one) + "\r\n"
-    text += "Cal2:" + ",".join(f"{v:.4f}" for v in two) + "\r\n"
-    return text.encode("ascii")
-
-
-def parse_cal_lines(data: bytes) -> dict[str, tuple[float, ...]]:
-    """Find the last ``Cal1:`` (10 numbers) and ``Cal2:`` (9 numbers) lines in ``data``.
-
-    Returns ``{"Cal1": (...), "Cal2": (...)}`` with whichever were found intact.
-    """
-    found: dict[str, tuple[float, ...]] = {}
-    for raw in bytes(data).split(b"\n"):
-        text = raw.decode("latin-1").strip()
-        for key, count in (("Cal1", 10), ("Cal2", 9)):
-            if text.startswith(key + ":"):
-                toks = text[len(key) + 1 :].split(",")
-                vals = [_parse_number(t.strip()) for t in toks]
-                if len(vals) == count and all(v is not None for v in vals):
-                    found[key] = tuple(float(v) for v in vals)  # type: ignore[arg-type]
-    return found

@@ -1,7 +1,8 @@
 """Read records from a sensor board on a serial port (pyserial), whatever goes wrong.
 
 :class:`SerialReader` opens the port, switches the board to the chosen protocol with a mode
-byte (TEAM.md: ``P`` polled, ``B`` binary, ``F`` framed, ``T`` text, ``R`` ``Raw:``), and
+byte (``firmware/README.md``: ``P`` polled, ``B`` binary, ``F`` framed, ``T`` text, ``R``
+``Raw:``), and
 returns records as they arrive, each with the host time at which it arrived. Decoding is done
 by the pure decoders of :mod:`triaxcal.io.protocol`; this module only moves bytes.
 

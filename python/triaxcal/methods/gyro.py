@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_samples
-from .detect import Rejection, detect_poses, detect_still
-from .errors import CalibrationError
+from .._validate import as_samples
+from ..detect import Rejection, detect_poses, detect_still
+from ..errors import CalibrationError
 
 __all__ = [
     "GyroBias",

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CalibrationError
+from ..errors import CalibrationError
 from .imu import TriadCalibration
 
 __all__ = [

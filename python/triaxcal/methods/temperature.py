@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CalibrationError
+from ..errors import CalibrationError
 
 __all__ = ["TemperatureModel", "TemperatureRangeWarning", "fit_temperature"]
 

@@ -28,10 +28,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from .detect import Pose, PoseDetector
-from .errors import CalibrationError
-from .io.serial import ReaderStats, Record, SerialReader
-from .sim import ACCEL_COUNTS_PER_G, CHANNELS_7, CHANNELS_10
+from ..detect import Pose, PoseDetector
+from ..errors import CalibrationError
+from ..units import DEVICE_COUNTS_PER_UNIT
+from .protocol import CHANNELS_7, CHANNELS_10
+from .serial import ReaderStats, Record, SerialReader
+
+ACCEL_COUNTS_PER_G = DEVICE_COUNTS_PER_UNIT["accel"][0]
 
 __all__ = [
     "CaptureResult",

@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_samples
-from .detect import detect_still
-from .errors import CalibrationError
-from .fit import fit_ellipsoid
+from .._validate import as_samples
+from ..detect import detect_still
+from ..errors import CalibrationError
+from ..fit import fit_ellipsoid
 
 __all__ = ["ImuCalibration", "SweepStep", "TriadCalibration", "calibrate_imu", "rotate_gravity"]
 

@@ -1,0 +1,127 @@
+"""Export a :class:`~triaxcal.Calibration` for firmware and for the stacks that consume it.
+
+One module per target format:
+
+* :mod:`~triaxcal.export.c` -- :func:`c_header`, a float C99 header: ``#define`` macros,
+  ``static const float`` arrays and ``static inline void <prefix>_<sensor>_apply(const float
+  raw[3], float out[3])`` (plus ``..._apply_t(raw, temp_c, out)`` with temperature terms).
+* :mod:`~triaxcal.export.c_fixed` -- :func:`c_fixed_header`, the same with no floating point
+  (Q7.24 matrix, int64 accumulation), and :func:`apply_fixed`, its bit-exact Python model.
+* :mod:`~triaxcal.export.motioncal` -- :func:`motioncal_packet`, the 68-byte PJRC MotionCal
+  packet that Adafruit_Sensor_Calibration sketches accept.
+* :func:`write_outputs` -- everything for a calibration into one folder (``triaxcal demo``).
+
+Error model of every export: ``calibrated = matrix @ (raw - offset)`` (the matrix
+**multiplies**; numpy form ``(raw - offset) @ matrix.T``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from ..calibration import SENSORS, Calibration
+from ..errors import CalibrationError
+from ..io.motioncal import (
+    MotionCalPacket,
+    decode_motioncal,
+    echo_matches,
+    encode_motioncal,
+    parse_motioncal_echo,
+)
+from ..io.protocol import crc16_modbus
+from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
+from ._cgen import _ident
+from .c import c_header
+from .c_fixed import FixedPoint, apply_fixed, c_fixed_header, fixed_point
+from .motioncal import motioncal_packet
+
+__all__ = [
+    "DEVICE_COUNTS_PER_UNIT",
+    "EXPORT_FORMATS",
+    "FixedPoint",
+    "MotionCalPacket",
+    "apply_fixed",
+    "c_fixed_header",
+    "c_header",
+    "crc16_modbus",
+    "decode_motioncal",
+    "echo_matches",
+    "encode_motioncal",
+    "export",
+    "fixed_point",
+    "motioncal_packet",
+    "parse_motioncal_echo",
+    "unit_factor",
+    "write_outputs",
+]
+
+EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal")
+
+
+def export(
+    cal: Calibration,
+    fmt: str,
+    path: str | Path,
+    *,
+    prefix: str = "triaxcal",
+    counts_per_unit: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write ``cal`` in format ``fmt`` (one of :data:`EXPORT_FORMATS`) to ``path``."""
+    p = Path(path)
+    if fmt == "c":
+        p.write_text(c_header(cal, prefix=prefix), encoding="utf-8")
+    elif fmt == "c-fixed":
+        p.write_text(c_fixed_header(cal, prefix=prefix), encoding="utf-8")
+    elif fmt == "json":
+        p.write_text(cal.to_json(), encoding="utf-8")
+    elif fmt == "motioncal":
+        p.write_bytes(motioncal_packet(cal, counts_per_unit=counts_per_unit))
+    else:
+        raise CalibrationError(f"unknown export format {fmt!r}: use one of {EXPORT_FORMATS}")
+    return p
+
+
+def write_outputs(
+    cal: Calibration,
+    points_by_sensor: Mapping[str, Any] | None,
+    out_dir: str | Path,
+    *,
+    prefix: str = "triaxcal",
+    plot: bool = True,
+) -> dict[str, Path]:
+    """Write everything for ``cal`` into ``out_dir``; returns the paths by kind.
+
+    Files: ``calibration.json``, ``<prefix>_calibration.h`` (float),
+    ``<prefix>_calibration_fixed.h`` (only when every part has raw counts), ``motioncal.bin``
+    (when there is a magnetometer or accelerometer part with a symmetric matrix), and per
+    sensor in ``points_by_sensor`` (raw (N, 3) readings) ``report_<sensor>.txt`` and, when
+    ``plot`` and matplotlib is installed, ``report_<sensor>.png``.
+    """
+    from .. import report as _report
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths: dict[str, Path] = {}
+    paths["json"] = cal.save(out / "calibration.json")
+    p = _ident(prefix)
+    paths["c"] = export(cal, "c", out / f"{p}_calibration.h", prefix=p)
+    if all(cal.part(s).raw_unit == "counts" for s in cal.sensors):
+        paths["c-fixed"] = export(cal, "c-fixed", out / f"{p}_calibration_fixed.h", prefix=p)
+    try:
+        paths["motioncal"] = export(cal, "motioncal", out / "motioncal.bin")
+    except CalibrationError:
+        pass  # e.g. a non-symmetric magnetometer matrix: the headers still carry it
+    for sensor, pts in (points_by_sensor or {}).items():
+        if sensor not in SENSORS or getattr(cal, sensor) is None:
+            continue
+        rep = _report.quality_report(pts, cal.part(sensor), sensor=sensor)
+        txt = out / f"report_{sensor}.txt"
+        txt.write_text(rep.text() + "\n", encoding="utf-8")
+        paths[f"report_{sensor}"] = txt
+        if plot and _report.have_matplotlib():
+            paths[f"figure_{sensor}"] = _report.plot_report(
+                pts, cal.part(sensor), out / f"report_{sensor}.png", report=rep
+            )
+    return paths

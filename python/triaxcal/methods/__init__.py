@@ -1,0 +1,55 @@
+"""Calibration methods beyond the plain ellipsoid fit, one module per idea.
+
+* :mod:`~triaxcal.methods.gyro` -- gyroscope bias at rest, gains by integrating known turns,
+  turntable fits.
+* :mod:`~triaxcal.methods.imu` -- multi-position accelerometer + gyroscope calibration without a
+  rig (Tedaldi et al. 2014).
+* :mod:`~triaxcal.methods.temperature` -- offsets and gains as polynomials in temperature.
+* :mod:`~triaxcal.methods.static` -- methods that need no fit: tilt rig, six-position
+  min/max, Ferraris closed form.
+"""
+
+from .gyro import (
+    GyroBias,
+    GyroGains,
+    Rotation,
+    TurntableFit,
+    find_rotations,
+    fit_turntable,
+    gyro_bias,
+    gyro_gains,
+)
+from .imu import ImuCalibration, SweepStep, TriadCalibration, calibrate_imu
+from .static import (
+    FerrarisCalibration,
+    SixPosition,
+    TiltRig,
+    ferraris,
+    six_position,
+    tilt_rig,
+)
+from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+
+__all__ = [
+    "FerrarisCalibration",
+    "GyroBias",
+    "GyroGains",
+    "ImuCalibration",
+    "Rotation",
+    "SixPosition",
+    "SweepStep",
+    "TemperatureModel",
+    "TemperatureRangeWarning",
+    "TiltRig",
+    "TriadCalibration",
+    "TurntableFit",
+    "calibrate_imu",
+    "ferraris",
+    "find_rotations",
+    "fit_temperature",
+    "fit_turntable",
+    "gyro_bias",
+    "gyro_gains",
+    "six_position",
+    "tilt_rig",
+]
