@@ -54,6 +54,7 @@ def fit_ellipsoid(
     tol: float,
     method: str,
     debias: bool,
+    fixed: list[float | None] | None = None,
 ) -> dict[str, Any]: ...
 def fit_batch(
     points: _Points,
@@ -65,6 +66,7 @@ def fit_batch(
     tol: float,
     method: str,
     debias: bool,
+    fixed: list[float | None] | None = None,
 ) -> dict[str, Any]: ...
 def apply(
     points: _Points, offset: _Vec3, matrix: list[list[float]]

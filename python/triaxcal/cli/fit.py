@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import re
 import sys
 from dataclasses import dataclass
@@ -226,6 +227,30 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", type=int, default=25, help="pose detection window (samples)")
     p.add_argument("--units-per-g", type=float, default=16384.0,
                    help="accelerometer counts per g, for --poses (16384 at +-2 g)")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold a parameter at a value instead of fitting it (repeatable): "
+                        "offset_x/y/z in raw units, gain_x/y/z (or gain for the sphere model) "
+                        "in calibrated units per raw unit -- with --radius 16384 a gain of 1 "
+                        "means unchanged counts, as in the seed's spreadsheet (--fix gain_z=1)")
+
+
+def parse_fix(items: list[str] | None) -> dict[str, float] | None:
+    """``["gain_z=1", ...]`` from ``--fix`` to ``{"gain_z": 1.0}`` (None when empty)."""
+    if not items:
+        return None
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not sep or not name.strip() or not math.isfinite(number):
+            raise CalibrationError(
+                f"--fix {item!r}: give NAME=VALUE with a finite number, e.g. --fix gain_z=1"
+            )
+        out[name.strip()] = number
+    return out
 
 
 @dataclass
@@ -274,7 +299,8 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     if args.rounds < 0:
         raise CalibrationError("--rounds must be >= 0")
     rob = fit_robust(pts, model=args.model, radius=radius, sigma=args.sigma,
-                     max_rounds=args.rounds, lengths=args.reject_on)
+                     max_rounds=args.rounds, lengths=args.reject_on,
+                     fixed=parse_fix(getattr(args, "fix", None)))
     extra: dict[str, Any] = {
         "columns": [table.names[c] if table.names else c for c in cols],
         "poses": bool(args.poses),
