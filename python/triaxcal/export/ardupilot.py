@@ -99,8 +99,9 @@ def _compass(p: Physical, index: int, scale_mode: Any, offsets_max: float) -> di
     for i, a in enumerate("XYZ"):
         out[f"COMPASS_OFS{n}_{a}"] = check_range(
             -float(p.offset[i]), -offsets_max, offsets_max, f"COMPASS_OFS{n}_{a}",
-            "ArduPilot refuses compass offsets beyond COMPASS_OFFS_MAX (pass offsets_max= if "
-            "your vehicle allows more, up to 3000)")
+            "ArduPilot refuses compass offsets beyond COMPASS_OFFS_MAX (default 1800 mG, at "
+            "most 3000; offsets_max= in Python); an offset this large usually means the fit "
+            "was not determined by the data")
     for i, a in enumerate("XYZ"):
         out[f"COMPASS_DIA{n}_{a}"] = check_range(
             float(shape[i, i]), 0.2, 5.0, f"COMPASS_DIA{n}_{a}",

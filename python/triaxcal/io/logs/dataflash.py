@@ -13,6 +13,8 @@ throughout (boards that do not report it) is dropped.
 
 from __future__ import annotations
 
+import contextlib
+import io
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +26,12 @@ from . import require
 from .autopilot import ardupilot_calibration
 
 __all__ = ["read_dataflash"]
+
+
+_FIELDS = {
+    "IMU": ("TimeUS", "AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ", "T", "Temp"),
+    "MAG": ("TimeUS", "MagX", "MagY", "MagZ", "OfsX", "OfsY", "OfsZ", "MOfsX", "MOfsY", "MOfsZ"),
+}
 
 
 def _message_names(kind: str, instance: int) -> tuple[str, ...]:
@@ -45,15 +53,26 @@ def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any 
     p = Path(path)
     if not p.is_file():
         raise CalibrationError(f"log file {p} not found")
+    with open(p, "rb") as fh:
+        head = fh.read(2)
+    if head != b"\xa3\x95":
+        raise CalibrationError(
+            f"{p} is not an ArduPilot DataFlash log: it does not start with the 0xA3 0x95 "
+            "message header (an empty, text or damaged file?)"
+        )
     wanted = sorted({*_message_names("IMU", inst), *_message_names("MAG", inst), "PARM", "MSG"})
     rows: dict[str, list[Any]] = {"IMU": [], "MAG": []}
     params: dict[str, float] = {}
     changed: set[str] = set()
     firmware = None
+    log = None
+    quiet = io.StringIO()  # pymavlink prints every damaged header it skips
     try:
-        log = dfreader.DFReader_binary(str(p), zero_time_base=False)
+        with contextlib.redirect_stdout(quiet):
+            log = dfreader.DFReader_binary(str(p), zero_time_base=False)
         while True:
-            msg = log.recv_match(type=wanted)
+            with contextlib.redirect_stdout(quiet):
+                msg = log.recv_match(type=wanted)
             if msg is None:
                 break
             kind = msg.get_type()
@@ -71,19 +90,23 @@ def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any 
                     firmware = text
                 continue
             base = kind[:3]
-            d = msg.to_dict()
-            if "I" in d:  # newer logs: one message type, instance in field I
-                if int(d["I"]) != inst:
+            names = msg.get_fieldnames()
+            if "I" in names:  # newer logs: one message type, instance in field I
+                if int(msg.I) != inst:
                     continue
             elif kind != (base if inst == 0 else f"{base}{inst + 1}"):
                 continue
-            rows[base].append(d)
+            rows[base].append({f: getattr(msg, f) for f in _FIELDS[base] if f in names})
     except CalibrationError:
         raise
     except Exception as exc:  # pymavlink raises assorted errors on damaged files
         raise CalibrationError(
             f"{p} is not a readable ArduPilot DataFlash log ({type(exc).__name__}: {exc})"
         ) from None
+    finally:
+        if log is not None:
+            log.close()
+    skipped = quiet.getvalue().count("bad header")
     if not rows["IMU"] and not rows["MAG"]:
         raise CalibrationError(
             f"{p} has no IMU or MAG messages for instance {inst} (is it a DataFlash .bin log "
@@ -132,6 +155,7 @@ def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any 
         "messages": {k: v.name for k, v in streams.items()},
         "mag_offsets_logged": mag_offsets,
         "mag_motor_offsets_logged": mag_motor,
+        "damaged_headers_skipped": skipped,
     }
     return LogRecording(**streams, source=str(p), format="ardupilot-dataflash", params=params,
                         autopilot=cal if cal is not None and cal.sensors else None, meta=meta)

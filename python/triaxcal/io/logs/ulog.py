@@ -72,10 +72,11 @@ def read_ulog(path: str | Path, *, instance: int | None = None, topic: Any = Non
             "(the per-sensor topics sensor_accel/sensor_gyro/sensor_mag instance N)"
         )
     p = Path(path)
+    if not p.is_file():
+        raise CalibrationError(f"log file {p} not found")
     try:
-        ulog = pyulog.ULog(str(p), list(_TOPICS))
-    except FileNotFoundError:
-        raise CalibrationError(f"log file {p} not found") from None
+        with open(p, "rb") as fh:
+            ulog = pyulog.ULog(fh, list(_TOPICS))
     except Exception as exc:  # pyulog raises plain Exceptions on damaged files
         raise CalibrationError(
             f"{p} is not a readable PX4 ULog file ({type(exc).__name__}: {exc})"
