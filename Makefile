@@ -1,10 +1,11 @@
 # One target per CI step; `.ci/run` calls `make test`, the README's test command.
 PY ?= python3
-APT_PACKAGES := gcc-avr avr-libc qemu-system-misc
+APT_PACKAGES := gcc-avr avr-libc qemu-system-misc valgrind
 
-.PHONY: deps install test test-rust test-python lint stubs bench demo wheel wheel-check
+.PHONY: deps install test test-rust test-python lint stubs bench bench-instructions instructions-guard demo wheel wheel-check
 
-# Debian packages the tests need (the AVR firmware build and its QEMU run). Skipped when
+# Debian packages the tests need (the AVR firmware build and its QEMU run; valgrind for the
+# instruction counts). Skipped when
 # everything is present already; needs root (as on CI) otherwise.
 deps:
 	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
@@ -42,10 +43,19 @@ wheel-check: wheel
 	PYTHON=$(PY) bash scripts/check_wheel.sh dist
 
 # Everything: the README's test command, and what CI runs.
-test: deps install test-rust lint test-python wheel-check
+test: deps install test-rust lint test-python instructions-guard wheel-check
 
 bench:
 	$(PY) benches/bench_fit.py
+
+# Instruction counts with valgrind (callgrind): per point per pass, per fit, per batch set.
+bench-instructions:
+	$(PY) benches/instructions.py
+
+# The regression guard: a fixed 1e5-point fit and a fixed batch may not grow by more than 10 %
+# over benches/instructions.json (update it with `benches/instructions.py --update`).
+instructions-guard:
+	$(PY) benches/instructions.py --check
 
 demo:
 	triaxcal demo

@@ -6,8 +6,9 @@
 //! axis and sphere models). It minimises an algebraic error, which noise biases by O(σ²); the
 //! geometric refinement in `ellipsoid` removes that.
 
-use crate::kernel::{Arith, Fused, Separate, LANES};
-use crate::simd;
+use crate::kernel::LANES;
+use crate::linalg;
+use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 
@@ -63,10 +64,11 @@ pub(crate) fn sphere_of<const M: usize>(
 /// sum to |q|²; the last four rows are 2x, 2y, 2z and 1).
 fn sphere_solve<const M: usize>(s: &SMatrix<f64, M, M>) -> Option<nalgebra::Vector4<f64>> {
     let l = M - 4;
-    let lin = nalgebra::Matrix4::from_fn(|i, j| s[(l + i, l + j)]);
+    let lin: [[f64; 4]; 4] = std::array::from_fn(|i| std::array::from_fn(|j| s[(l + i, l + j)]));
     // the design rows hold 2x, 2y, 2z: the unknowns are c (x2) and d
-    let rhs = nalgebra::Vector4::from_fn(|i, _| s[(l + i, 0)] + s[(l + i, 1)] + s[(l + i, 2)]);
-    lin.cholesky().map(|c| c.solve(&rhs))
+    let rhs: [f64; 4] = std::array::from_fn(|i| s[(l + i, 0)] + s[(l + i, 1)] + s[(l + i, 2)]);
+    let f = linalg::cholesky(&lin)?;
+    Some(nalgebra::Vector4::from(linalg::cholesky_solve(&f, &rhs)))
 }
 
 /// `qᵀ M q + 2 bᵀ q + c = 0` to `(offset, W)` with `‖W (q - offset)‖ = 1`.
@@ -81,41 +83,26 @@ fn quadric_to_ellipsoid(
     } else {
         (mq, b, c)
     };
-    let o = mq.try_inverse()? * (-b);
+    let arr: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| mq[(i, j)]));
+    let inv = linalg::inverse3(&arr)?;
+    let o = Vector3::from_fn(|i, _| -(inv[i][0] * b.x + inv[i][1] * b.y + inv[i][2] * b.z));
     let k = o.dot(&(mq * o)) - c;
     if !(k > 0.0) {
         return None;
     }
-    let e = SymmetricEigen::new(mq / k);
-    if e.eigenvalues.iter().any(|&l| !(l > 0.0) || !l.is_finite()) {
+    let a = mq / k;
+    let ev = crate::geometry::sym3_eigenvalues(&a);
+    if ev.iter().any(|&l| !(l > 0.0) || !l.is_finite()) {
         return None;
     }
-    let sq = Matrix3::from_diagonal(&e.eigenvalues.map(f64::sqrt));
-    Some((o, e.eigenvectors * sq * e.eigenvectors.transpose()))
-}
-
-/// The design row of a normalised point (`M` = 10: full quadric; 7: axis-aligned).
-#[inline(always)]
-fn row<const M: usize>(x: f64, y: f64, z: f64) -> [f64; M] {
-    let mut r = [0.0; M];
-    r[0] = x * x;
-    r[1] = y * y;
-    r[2] = z * z;
-    if M == 10 {
-        r[3] = 2.0 * x * y;
-        r[4] = 2.0 * x * z;
-        r[5] = 2.0 * y * z;
-    }
-    r[M - 4] = 2.0 * x;
-    r[M - 3] = 2.0 * y;
-    r[M - 2] = 2.0 * z;
-    r[M - 1] = 1.0;
-    r
+    let arr: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
+    let w = linalg::sqrtm3(&arr)?;
+    Some((o, Matrix3::from_fn(|i, j| w[i][j])))
 }
 
 /// `Σ d dᵀ` over the design rows `d` of the normalised points.
 fn scatter<const M: usize>(points: &[[f64; 3]], norm: Norm, parallel: bool) -> SMatrix<f64, M, M> {
-    let part = |c: &[[f64; 3]]| scatter_serial::<M>(c, norm);
+    let part = |c: &[[f64; 3]]| dispatch!(|simd| scatter_lanes::<_, M>(simd, c, norm));
     let acc = if parallel && points.len() > crate::kernel::PARALLEL_ABOVE {
         points.par_chunks(crate::kernel::CHUNK).map(part).reduce(
             || [[0.0; M]; M],
@@ -134,58 +121,121 @@ fn scatter<const M: usize>(points: &[[f64; 3]], norm: Norm, parallel: bool) -> S
     SMatrix::<f64, M, M>::from_fn(|i, j| if i <= j { acc[i][j] } else { acc[j][i] })
 }
 
-fn scatter_serial<const M: usize>(points: &[[f64; 3]], norm: Norm) -> [[f64; M]; M] {
-    #[cfg(target_arch = "x86_64")]
-    if simd::has_avx2_fma() {
-        return simd::avx2_call!(scatter_avx2::<M>(points, norm));
-    }
-    scatter_lanes::<Separate, M>(points, norm)
-}
+/// Groups per block of the scatter (see `kernel`'s blocks).
+const BLOCK: usize = 8;
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn scatter_avx2<const M: usize>(points: &[[f64; 3]], norm: Norm) -> [[f64; M]; M] {
-    scatter_lanes::<Fused, M>(points, norm)
-}
-
-/// Lane-wise upper triangle of `Σ d dᵀ`.
+/// The design rows of a group: `x², y², z², [2xy, 2xz, 2yz,] 2x, 2y, 2z, 1` (times `wt`).
 #[inline(always)]
-fn scatter_lanes<A: Arith, const M: usize>(points: &[[f64; 3]], norm: Norm) -> [[f64; M]; M] {
-    let mut acc = [[[0.0f64; LANES]; M]; M];
-    let m = [norm.mean.x, norm.mean.y, norm.mean.z];
-    let s = norm.inv_scale;
-    let mut add = |g: &[[f64; 3]], wt: &[f64; LANES]| {
-        let mut d = [[0.0f64; LANES]; M];
-        for l in 0..LANES {
-            let p = g[l.min(g.len() - 1)];
-            let r = row::<M>((p[0] - m[0]) * s, (p[1] - m[1]) * s, (p[2] - m[2]) * s);
-            for a in 0..M {
-                d[a][l] = r[a] * wt[l];
-            }
-        }
-        for a in 0..M {
-            for b in a..M {
-                for l in 0..LANES {
-                    acc[a][b][l] = A::fma(d[a][l], d[b][l], acc[a][b][l]);
+fn design<S: Simd, const M: usize>(
+    s: S,
+    x: [S::V; 3],
+    mean: &[S::V; 3],
+    inv: S::V,
+    wt: S::V,
+) -> [S::V; M] {
+    let q = arr3!(|k| s.mul(s.sub(x[k], mean[k]), inv));
+    let q2 = arr3!(|k| s.mul(s.add(q[k], q[k]), wt)); // 2x, 2y, 2z (weighted)
+    let mut d = [s.zero(); M];
+    for k in 0..3 {
+        d[k] = s.mul(s.mul(q[k], q[k]), wt);
+    }
+    if M == 10 {
+        d[3] = s.mul(q[0], q2[1]);
+        d[4] = s.mul(q[0], q2[2]);
+        d[5] = s.mul(q[1], q2[2]);
+    }
+    d[M - 4] = q2[0];
+    d[M - 3] = q2[1];
+    d[M - 2] = q2[2];
+    d[M - 1] = wt;
+    d
+}
+
+/// Entries of the packed upper triangle of the (at most 10 x 10) scatter matrix.
+const PACKED: usize = 55;
+
+/// Index of `(a, b)`, `a <= b`, in the packed upper triangle of an `m x m` matrix.
+#[inline(always)]
+const fn packed(m: usize, a: usize, b: usize) -> usize {
+    a * m - a * a.saturating_sub(1) / 2 - if a > 0 { a } else { 0 } + b
+}
+
+/// Adds the `G` design rows `rows` to `acc`, one row of the scatter matrix at a time (its
+/// accumulators in registers).
+#[inline(always)]
+fn add_rows<S: Simd, const M: usize, const G: usize>(
+    s: S,
+    rows: &[[S::V; M]; G],
+    acc: &mut [S::V; PACKED],
+) {
+    macro_rules! row {
+        ($a:literal) => {
+            if $a < M {
+                let mut row = [s.zero(); M];
+                for d in rows.iter() {
+                    for b in $a..M {
+                        row[b] = s.fma(d[$a], d[b], row[b]);
+                    }
+                }
+                for b in $a..M {
+                    let i = packed(M, $a, b);
+                    acc[i] = s.add(acc[i], row[b]);
                 }
             }
+        };
+    }
+    row!(0);
+    row!(1);
+    row!(2);
+    row!(3);
+    row!(4);
+    row!(5);
+    row!(6);
+    row!(7);
+    row!(8);
+    row!(9);
+}
+
+/// Upper triangle of `Σ d dᵀ` over the design rows of the points.
+#[inline(always)]
+fn scatter_lanes<S: Simd, const M: usize>(s: S, points: &[[f64; 3]], norm: Norm) -> [[f64; M]; M] {
+    let mut acc = [s.zero(); PACKED];
+    let mean = arr3!(|k| s.splat(norm.mean[k]));
+    let inv = s.splat(norm.inv_scale);
+    let one = s.splat(1.0);
+    let (groups, rest) = points.as_chunks::<LANES>();
+    let (blocks, tail) = groups.as_chunks::<BLOCK>();
+    for b in blocks {
+        macro_rules! d {
+            ($g:literal) => {
+                design::<S, M>(s, s.load_xyz(&b[$g]), &mean, inv, one)
+            };
         }
-    };
-    let groups = points.chunks_exact(LANES);
-    let rest = groups.remainder();
-    for g in groups {
-        add(g, &[1.0; LANES]);
+        let rows = [d!(0), d!(1), d!(2), d!(3), d!(4), d!(5), d!(6), d!(7)];
+        add_rows::<S, M, BLOCK>(s, &rows, &mut acc);
+    }
+    for grp in tail {
+        let rows = [design::<S, M>(s, s.load_xyz(grp), &mean, inv, one)];
+        add_rows::<S, M, 1>(s, &rows, &mut acc);
     }
     if !rest.is_empty() {
         let mut wt = [0.0; LANES];
         wt[..rest.len()].fill(1.0);
-        add(rest, &wt);
+        let mut grp = [rest[0]; LANES];
+        grp[..rest.len()].copy_from_slice(rest);
+        let rows = [design::<S, M>(
+            s,
+            s.load_xyz(&grp),
+            &mean,
+            inv,
+            s.vector(wt),
+        )];
+        add_rows::<S, M, 1>(s, &rows, &mut acc);
     }
     let mut out = [[0.0; M]; M];
     for a in 0..M {
         for b in a..M {
-            let v = &acc[a][b];
-            out[a][b] = (v[0] + v[1]) + (v[2] + v[3]);
+            out[a][b] = s.sum(acc[packed(M, a, b)]);
         }
     }
     out
@@ -209,14 +259,17 @@ fn smallest_eigenvector_of<const M: usize>(s: SMatrix<f64, M, M>) -> Option<SVec
     }
     v /= v.norm();
     let shift = 1e-13 * s.trace();
-    let chol = (s + SMatrix::<f64, M, M>::identity() * shift).cholesky();
-    let Some(chol) = chol else {
+    let shifted: [[f64; M]; M] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| s[(i, j)] + if i == j { shift } else { 0.0 })
+    });
+    let Some(chol) = linalg::cholesky(&shifted) else {
         let e = SymmetricEigen::new(DMatrix::from_fn(M, M, |i, j| s[(i, j)]));
         let i = e.eigenvalues.imin();
         return Some(SVector::<f64, M>::from_fn(|k, _| e.eigenvectors[(k, i)]));
     };
     for _ in 0..50 {
-        let mut w = chol.solve(&v);
+        let x = linalg::cholesky_solve(&chol, &std::array::from_fn(|i| v[i]));
+        let mut w = SVector::<f64, M>::from_column_slice(&x);
         let n = w.norm();
         if !(n > 0.0 && n.is_finite()) {
             return None;

@@ -61,13 +61,15 @@ use crate::bounds;
 use crate::error::{check_positive, CalError, Result};
 use crate::geometry::{self, Spread};
 use crate::kernel::{self, Setup, Sums, Want};
+use crate::linalg;
 use nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 
 /// Inputs with more points than this are first solved on a subsample.
 pub const SUBSAMPLE_ABOVE: usize = 60_000;
-/// Size of that subsample.
-pub const SUBSAMPLE_SIZE: usize = 20_000;
+/// Size of that subsample: between these, `n / 25` (a larger subsample makes its solution and
+/// its `JᵀJ` closer to the full data's, so that fewer passes over all points polish it).
+pub const SUBSAMPLE_SIZE: (usize, usize) = (20_000, 40_000);
 /// Most polishing passes over all points before falling back to Levenberg-Marquardt.
 const MAX_POLISH: usize = 8;
 
@@ -324,7 +326,10 @@ fn solve<const P: usize>(
             g[i] = 0.0;
         }
     }
-    a.cholesky().map(|c| c.solve(&g))
+    let arr: [[f64; P]; P] = std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
+    let l = linalg::cholesky(&arr)?;
+    let x = linalg::cholesky_solve(&l, &std::array::from_fn(|i| g[i]));
+    Some(SVector::<f64, P>::from_column_slice(&x))
 }
 
 /// The noise term `h = σ²/2` of the debiased residual: the fixed point `h = Σ(r₀ - h c)² /
@@ -347,25 +352,58 @@ struct Refined<const P: usize> {
     converged: bool,
 }
 
+/// The noise term of the residual during a refinement.
+#[derive(Clone, Copy, Debug)]
+enum Noise {
+    /// `h` held fixed (0: the plain geometric residual).
+    Fixed(f64),
+    /// `h` re-estimated from every accepted pass (see [`noise_term`]), for data sets of this
+    /// many points.
+    Estimated(usize),
+}
+
+/// The noise term `h = σ²/2` for a pass over `n` points, or 0 where the O(σ²) bias is buried
+/// in the statistical error: correct only when σ² > σ / (10 √n), i.e. σ > 0.1 / √n in
+/// unit-radius terms.
+fn noise_term<const P: usize>(a: &Sums<P>, n: usize) -> f64 {
+    let sigma2 = a.r0r0 / a.wq.max(f64::MIN_POSITIVE);
+    if sigma2.sqrt() > 0.1 / (n as f64).sqrt() {
+        half_sigma2(a)
+    } else {
+        0.0
+    }
+}
+
 /// Levenberg-Marquardt (or Gauss-Newton) on `points` with the residual `r₀ - h c`; returns the
-/// solution and the sums of the pass at it (with `JᵀJ`).
+/// solution, the sums of the pass at it (with `JᵀJ`) and the `h` in force there. With
+/// [`Noise::Estimated`], `h` follows the residuals of each accepted pass (steps are judged with
+/// the `h` they were computed for), so that one run converges to the debiased fixed point.
 fn refine<const P: usize>(
     points: &[[f64; 3]],
     norm: Norm,
     mut th: [f64; P],
     opts: &FitOptions,
-    h: f64,
+    noise: Noise,
     free: &[bool; P],
     max_iter: usize,
-) -> (Refined<P>, Sums<P>) {
+) -> (Refined<P>, Sums<P>, f64) {
     let par = opts.parallel;
-    let want = Want {
+    let (estimate, mut h) = match noise {
+        Noise::Fixed(h) => (None, h),
+        Noise::Estimated(n) => (Some(n), 0.0),
+    };
+    // the noise sums (Jᵀc...) are gathered after the first pass only if the noise matters
+    let mut want = Want {
         jtj: true,
-        debias: h != 0.0,
+        debias: estimate.is_some() || h != 0.0,
         coverage: false,
     };
     let gn = opts.method == Method::GaussNewton;
     let mut acc = kernel::pass::<P>(points, &setup(norm, &th), want, par);
+    if let Some(n) = estimate {
+        h = noise_term(&acc, n);
+        want.debias = h > 0.0;
+    }
     let mut cost = acc.cost(h);
     let mut lambda = if gn { 0.0 } else { 1e-3 };
     let mut iterations = 0;
@@ -422,9 +460,24 @@ fn refine<const P: usize>(
                 th = cand;
                 acc = cacc;
                 cost = ccost;
+                let mut steady = true;
+                if let Some(n) = estimate {
+                    let h_new = noise_term(&acc, n);
+                    if want.debias {
+                        // a change of h moves the minimum by about (Δh)² Σc² in cost
+                        steady = (h_new - h).powi(2) * acc.cc <= opts.tol * cost;
+                        h = h_new;
+                        cost = acc.cost(h);
+                    } else if h_new > 0.0 {
+                        // the noise matters after all: gather its sums from the next pass on
+                        want.debias = true;
+                        steady = false;
+                    }
+                }
                 lambda = (lambda / 10.0).max(if lambda == 0.0 { 0.0 } else { 1e-12 });
-                if decrease <= opts.tol * cost.max(1e-300) + 1e-300
-                    || dnorm <= 1e-14 * (tnorm + 1e-14)
+                if steady
+                    && (decrease <= opts.tol * cost.max(1e-300) + 1e-300
+                        || dnorm <= 1e-14 * (tnorm + 1e-14))
                 {
                     converged = true;
                     break;
@@ -451,6 +504,7 @@ fn refine<const P: usize>(
             converged,
         },
         acc,
+        h,
     )
 }
 
@@ -473,6 +527,7 @@ struct Final<const P: usize> {
 /// not contract (the caller then runs Levenberg-Marquardt on all points).
 fn polish<const P: usize>(
     points: &[[f64; 3]],
+    n_work: usize,
     norm: Norm,
     mut th: [f64; P],
     mut jtj: SMatrix<f64, P, P>,
@@ -480,9 +535,9 @@ fn polish<const P: usize>(
     free: &[bool; P],
     max_iter: usize,
 ) -> std::result::Result<Final<P>, [f64; P]> {
-    let n = points.len() as f64;
-    // ρ²: how much each step shrinks the next one's predicted decrease (guessed until seen)
-    let mut rho2 = 2.5e-3;
+    // ρ²: how much each step shrinks the next one's predicted decrease (guessed until seen:
+    // about 10 / subsample size when the subsample's JᵀJ stands in for the full one)
+    let mut rho2 = 10.0 / n_work as f64;
     let mut heavy = false;
     let mut prev: Option<(f64, f64, f64, f64)> = None; // (h, cost, predicted decrease, f) of the last pass
     for k in 0..MAX_POLISH.min(max_iter.max(1)) {
@@ -491,11 +546,14 @@ fn polish<const P: usize>(
         let want = Want {
             jtj: heavy,
             debias: opts.debias,
-            coverage: heavy && opts.diagnostics,
+            coverage: false, // from the subsample: see `finish`
         };
         let a = kernel::pass::<P>(points, &setup(norm, &th), want, opts.parallel);
-        let active = opts.debias && (a.r0r0 / a.wq.max(f64::MIN_POSITIVE)).sqrt() > 0.1 / n.sqrt();
-        let h = if active { half_sigma2(&a) } else { 0.0 };
+        let h = if opts.debias {
+            noise_term(&a, points.len())
+        } else {
+            0.0
+        };
         if let Some((hp, before, decrease, _)) = prev {
             // the last step must have achieved at least half the decrease it promised
             let now = a.cost(hp);
@@ -531,6 +589,9 @@ fn polish<const P: usize>(
             next[i] += delta[i];
         }
         let done = rho2 * f <= opts.tol || f <= 1e-28;
+        if std::env::var_os("TRIAXCAL_DEBUG").is_some() {
+            eprintln!("polish k={k} heavy={heavy} f={f:.3e} rho2={rho2:.2e} done={done}");
+        }
         if heavy && done {
             let jtr0 = SVector::<f64, P>::from_column_slice(&a.jtr0);
             let plain = (a.r0r0 + 2.0 * delta.dot(&jtr0) + dhd).max(0.0);
@@ -541,7 +602,7 @@ fn polish<const P: usize>(
                 plain,
                 iterations: k + 1,
                 converged: true,
-                coverage: opts.diagnostics,
+                coverage: false,
             });
         }
         // the next pass is the last when this step leaves too little for another to matter,
@@ -560,6 +621,7 @@ fn polish<const P: usize>(
 /// Errors: non-finite points, too few points for the model, points on a line or plane, or
 /// points that cover too little of the sphere to determine the model's parameters, and results
 /// that do not fit in double precision.
+#[inline(never)] // a stable symbol for instruction counts (`benches/instructions.py`)
 pub fn fit_ellipsoid(points: &[[f64; 3]], opts: &FitOptions) -> Result<EllipsoidFit> {
     if let Some(r) = opts.radius {
         check_positive("radius", r)?;
@@ -736,10 +798,7 @@ fn subsample(points: &[[f64; 3]], size: usize, parallel: bool) -> Vec<[f64; 3]> 
     } else {
         part(points)
     };
-    let mut hashes: Vec<u64> = picked.iter().map(point_hash).collect();
-    hashes.sort_unstable();
-    hashes.dedup();
-    if hashes.len() >= MIN_DISTINCT.min(size / 2) && picked.len() >= size / 2 {
+    if distinct_at_least(&picked, MIN_DISTINCT.min(size / 2)) && picked.len() >= size / 2 {
         return picked;
     }
     let nb = size.min(n).max(1);
@@ -757,19 +816,31 @@ fn subsample(points: &[[f64; 3]], size: usize, parallel: bool) -> Vec<[f64; 3]> 
 /// position, see [`subsample`]).
 const MIN_DISTINCT: usize = 2000;
 
-/// A well-mixed hash of a point's bits.
+/// A hash of a point's bits (multiplicative hashing, twice: the high bits depend on all the
+/// bits of all three coordinates).
 #[inline(always)]
 fn point_hash(p: &[f64; 3]) -> u64 {
-    let h = p[0].to_bits().wrapping_mul(0x9e37_79b9_7f4a_7c15)
-        ^ p[1]
-            .to_bits()
-            .wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
-            .rotate_left(21)
-        ^ p[2]
-            .to_bits()
-            .wrapping_mul(0x1656_67b1_9e37_79f9)
-            .rotate_left(42);
-    splitmix64(h)
+    let h = p[0].to_bits() ^ p[1].to_bits().rotate_left(21) ^ p[2].to_bits().rotate_left(42);
+    let h = h.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    (h ^ (h >> 32)).wrapping_mul(0xd6e8_feb8_6659_fd93)
+}
+
+/// Whether `points` hold at least `want` distinct values, estimated by linear counting over a
+/// 65,536-bit map of their hashes (exact enough for the few thousand this is asked about).
+fn distinct_at_least(points: &[[f64; 3]], want: usize) -> bool {
+    const BITS: usize = 1 << 16;
+    let mut map = vec![0u64; BITS / 64];
+    for p in points {
+        let h = (point_hash(p) >> 16) as usize & (BITS - 1);
+        map[h / 64] |= 1 << (h % 64);
+    }
+    let empty = BITS - map.iter().map(|w| w.count_ones() as usize).sum::<usize>();
+    let estimate = if empty == 0 {
+        f64::INFINITY
+    } else {
+        -(BITS as f64) * (empty as f64 / BITS as f64).ln()
+    };
+    estimate >= want as f64
 }
 
 /// SplitMix64: a well-mixed 64-bit hash of `x`.
@@ -810,7 +881,11 @@ fn fit_generic<const P: usize>(
     let subsampled = n > SUBSAMPLE_ABOVE && opts.method != Method::Algebraic;
     let store;
     let work: &[[f64; 3]] = if subsampled {
-        store = subsample(points, SUBSAMPLE_SIZE, opts.parallel);
+        store = subsample(
+            points,
+            (n / 25).clamp(SUBSAMPLE_SIZE.0, SUBSAMPLE_SIZE.1),
+            opts.parallel,
+        );
         &store
     } else {
         points
@@ -854,28 +929,20 @@ fn fit_generic<const P: usize>(
             coverage: opts.diagnostics,
         }
     } else {
-        // plain geometric fit, then the debiasing rounds, each started from the previous
-        // solution; large inputs do all of that on the subsample and polish on all points
-        let (mut r, mut acc) = refine::<P>(work, norm, th0, opts, 0.0, &free, opts.max_iter);
-        let mut iterations = r.iterations;
-        let mut h = 0.0;
-        // the O(σ²) bias matters only when it is not buried in the statistical error (σ/√N
-        // relative): correct when σ² > σ / (10 √N), i.e. σ > 0.1 / √N in unit-radius terms
-        let sigma2_est = acc.r0r0 / acc.wq.max(f64::MIN_POSITIVE);
+        // the geometric fit, debiased with the noise level of its own residuals; large inputs
+        // do that on the subsample and polish on all points
         let exact = n == nfree;
-        if opts.debias && !exact && sigma2_est.sqrt() > 0.1 / (work.len() as f64).sqrt() {
-            for _ in 0..2 {
-                h = half_sigma2(&acc);
-                let left = opts.max_iter.saturating_sub(iterations);
-                let (r2, acc2) = refine::<P>(work, norm, r.th, opts, h, &free, left);
-                iterations += r2.iterations;
-                (r, acc) = (r2, acc2);
-            }
-        }
+        let noise = if opts.debias && !exact {
+            Noise::Estimated(work.len())
+        } else {
+            Noise::Fixed(0.0)
+        };
+        let (r, acc, h) = refine::<P>(work, norm, th0, opts, noise, &free, opts.max_iter);
+        let iterations = r.iterations;
         if subsampled {
             let left = opts.max_iter.saturating_sub(iterations);
             let jtj = full_matrix(&acc.jtj) * (n as f64 / work.len() as f64);
-            match polish::<P>(points, norm, r.th, jtj, opts, &free, left) {
+            match polish::<P>(points, work.len(), norm, r.th, jtj, opts, &free, left) {
                 Ok(mut f) => {
                     f.iterations += iterations;
                     f
@@ -889,11 +956,10 @@ fn fit_generic<const P: usize>(
                         coverage: false,
                     };
                     let a = kernel::pass::<P>(points, &setup(norm, &th), want, opts.parallel);
-                    let active = opts.debias
-                        && (a.r0r0 / a.wq.max(f64::MIN_POSITIVE)).sqrt() > 0.1 / (n as f64).sqrt();
-                    let h = if active { half_sigma2(&a) } else { 0.0 };
+                    let h = if opts.debias { noise_term(&a, n) } else { 0.0 };
                     let left = opts.max_iter.saturating_sub(iterations + MAX_POLISH);
-                    let (r2, acc2) = refine::<P>(points, norm, th, opts, h, &free, left);
+                    let (r2, acc2, _) =
+                        refine::<P>(points, norm, th, opts, Noise::Fixed(h), &free, left);
                     Final {
                         th: r2.th,
                         cost: acc2.cost(h),
@@ -917,12 +983,15 @@ fn fit_generic<const P: usize>(
             }
         }
     };
-    finish::<P>(points, sp, norm, opts, fin, &free, nfree)
+    finish::<P>(points, work, sp, norm, opts, fin, &free, nfree)
 }
 
-/// Standard errors, physical bounds, coverage and the mapping back to raw units.
+/// Standard errors, physical bounds, coverage and the mapping back to raw units. The coverage
+/// of the sphere is measured on `sample` (the subsample of a large input: its face counts are
+/// scaled to all points).
 fn finish<const P: usize>(
     points: &[[f64; 3]],
+    sample: &[[f64; 3]],
     sp: &Spread,
     norm: Norm,
     opts: &FitOptions,
@@ -961,13 +1030,15 @@ fn finish<const P: usize>(
             jtj[(i, i)] = 1.0;
         }
     }
-    let dscale = SVector::<f64, P>::from_fn(|i, _| 1.0 / jtj[(i, i)].max(1e-300).sqrt());
-    let scaled = SMatrix::<f64, P, P>::from_fn(|i, j| jtj[(i, j)] * dscale[i] * dscale[j]);
-    let Some(inv) = scaled.cholesky().map(|c| c.inverse()) else {
+    let dscale: [f64; P] = std::array::from_fn(|i| 1.0 / jtj[(i, i)].max(1e-300).sqrt());
+    let scaled: [[f64; P]; P] =
+        std::array::from_fn(|i| std::array::from_fn(|j| jtj[(i, j)] * dscale[i] * dscale[j]));
+    let Some(inv) = linalg::cholesky(&scaled).map(|l| linalg::cholesky_inverse(&l)) else {
         return Err(not_determined(model, "singular normal matrix"));
     };
     // Frobenius-norm condition number: at most P times the 2-norm one, and cheap
-    let condition = scaled.norm() * inv.norm();
+    let frob = |m: &[[f64; P]; P]| m.iter().flatten().map(|v| v * v).sum::<f64>().sqrt();
+    let condition = frob(&scaled) * frob(&inv);
     if !(condition < 1e13) {
         return Err(not_determined(
             model,
@@ -983,9 +1054,7 @@ fn finish<const P: usize>(
     let mut se_th = [0.0; P];
     for i in 0..P {
         if free[i] {
-            se_th[i] = (inv[(i, i)] * dscale[i] * dscale[i] * sigma2)
-                .max(0.0)
-                .sqrt();
+            se_th[i] = (inv[i][i] * dscale[i] * dscale[i] * sigma2).max(0.0).sqrt();
             if exact {
                 se_th[i] = f64::NAN;
             }
@@ -1087,10 +1156,11 @@ fn finish<const P: usize>(
             let mut th1 = th;
             let w1t = theta_of::<9>(o, &w1);
             th1[3..P].copy_from_slice(&w1t[3..P]);
-            let c = kernel::pass::<P>(points, &setup(norm, &th1), want, opts.parallel);
+            let c = kernel::pass::<P>(sample, &setup(norm, &th1), want, opts.parallel);
+            let up = n as f64 / sample.len() as f64;
             fin.sums.dd = c.dd;
-            fin.sums.faces = c.faces;
-            fin.sums.count = c.count;
+            fin.sums.faces = c.faces.map(|f| (f * up).round());
+            fin.sums.count = c.count * up;
         }
         let a = &fin.sums;
         let cnt = a.count.max(1.0);
@@ -1127,6 +1197,27 @@ fn finish<const P: usize>(
         n,
         warnings,
     })
+}
+
+/// One accumulation pass of the "full" model over `points` (normalised by `mean` and `scale`,
+/// at the unit sphere): `kind` 0 sums `JᵀJ` and `Jᵀr` (the unit of work that instruction counts
+/// are quoted in), 1 only `Jᵀr` and the noise sums (a polishing pass), 2 everything and the
+/// coverage. Returns a checksum. For benchmarks.
+#[doc(hidden)]
+#[inline(never)]
+pub fn bench_one_pass(points: &[[f64; 3]], mean: [f64; 3], scale: f64, kind: u8) -> f64 {
+    let norm = Norm {
+        mean: Vector3::from(mean),
+        inv_scale: 1.0 / scale,
+    };
+    let th = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0];
+    let want = Want {
+        jtj: kind != 1,
+        debias: kind != 0,
+        coverage: kind == 2,
+    };
+    let a = kernel::pass::<9>(points, &setup(norm, &th), want, false);
+    a.jtj[0][0] + a.jtr0[0] + a.r0r0
 }
 
 /// Applies a fit: `out[i] = W (points[i] - offset)`.

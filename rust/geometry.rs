@@ -5,6 +5,7 @@
 //! line or a plane from one that can determine a sphere or an ellipsoid.
 
 use crate::error::{check_finite, CalError, Result};
+use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -70,8 +71,8 @@ pub fn scan(points: &[[f64; 3]], parallel: bool) -> Result<Scan> {
     } else {
         part(points)
     };
-    if !probe.is_finite() || probe != 0.0 {
-        check_finite(points)?;
+    if !probe.is_finite() {
+        check_finite(points)?; // a NaN or an infinity; otherwise an overflow (rescaled later)
     }
     Ok(Scan {
         p0,
@@ -82,32 +83,56 @@ pub fn scan(points: &[[f64; 3]], parallel: bool) -> Result<Scan> {
     })
 }
 
-/// Moments about `p0`, the largest magnitude, and a probe that is 0 when every coordinate is
-/// finite (`x - x` is NaN for NaN and infinities).
+/// Moments about `p0`, the largest magnitude, and a probe that is finite exactly when every
+/// coordinate is (a NaN or an infinity makes the sums non-finite; so can an overflow, which
+/// the caller tells apart with [`check_finite`]).
 fn scan_part(points: &[[f64; 3]], p0: [f64; 3]) -> ([f64; 3], [f64; 6], f64, f64) {
-    let mut s1 = [0.0f64; 3];
-    let mut s2 = [0.0f64; 6];
-    let mut m = 0.0f64;
-    let mut probe = 0.0f64;
-    for p in points {
+    dispatch!(|simd| scan_lanes(simd, points, p0))
+}
+
+#[inline(always)]
+fn scan_lanes<S: Simd>(s: S, points: &[[f64; 3]], p0: [f64; 3]) -> ([f64; 3], [f64; 6], f64, f64) {
+    let c = arr3!(|k| s.splat(p0[k]));
+    let mut s1 = [s.zero(); 3];
+    let mut s2 = [s.zero(); 6];
+    let mut m = s.zero();
+    let (groups, rest) = points.as_chunks::<4>();
+    for g in groups {
+        let x = s.load_xyz(g);
+        let d = arr3!(|k| s.sub(x[k], c[k]));
+        for k in 0..3 {
+            s1[k] = s.add(s1[k], d[k]);
+        }
+        s2[0] = s.fma(d[0], d[0], s2[0]);
+        s2[1] = s.fma(d[1], d[1], s2[1]);
+        s2[2] = s.fma(d[2], d[2], s2[2]);
+        s2[3] = s.fma(d[0], d[1], s2[3]);
+        s2[4] = s.fma(d[0], d[2], s2[4]);
+        s2[5] = s.fma(d[1], d[2], s2[5]);
+        m = s.max(m, s.max(s.abs(x[0]), s.max(s.abs(x[1]), s.abs(x[2]))));
+    }
+    let mut t1 = arr3!(|k| s.sum(s1[k]));
+    let mut t2 = [0.0; 6];
+    for k in 0..6 {
+        t2[k] = s.sum(s2[k]);
+    }
+    let ma = s.to_array(m);
+    let mut mx = ma[0].max(ma[1]).max(ma[2].max(ma[3]));
+    for p in rest {
         let d = [p[0] - p0[0], p[1] - p0[1], p[2] - p0[2]];
         for k in 0..3 {
-            s1[k] += d[k];
-            // x - x is 0 for finite x and NaN for NaN or infinities
-            #[allow(clippy::eq_op)]
-            {
-                probe += p[k] - p[k];
-            }
-            m = m.max(p[k].abs());
+            t1[k] += d[k];
+            mx = mx.max(p[k].abs());
         }
-        s2[0] += d[0] * d[0];
-        s2[1] += d[1] * d[1];
-        s2[2] += d[2] * d[2];
-        s2[3] += d[0] * d[1];
-        s2[4] += d[0] * d[2];
-        s2[5] += d[1] * d[2];
+        t2[0] += d[0] * d[0];
+        t2[1] += d[1] * d[1];
+        t2[2] += d[2] * d[2];
+        t2[3] += d[0] * d[1];
+        t2[4] += d[0] * d[2];
+        t2[5] += d[1] * d[2];
     }
-    (s1, s2, m, probe)
+    let probe = t1.iter().sum::<f64>() + t2.iter().sum::<f64>();
+    (t1, t2, mx, probe)
 }
 
 /// Whether readings of largest magnitude `max_abs` must be rescaled (see [`RESCALE_EXP`]).
@@ -185,12 +210,15 @@ pub fn spread(points: &[[f64; 3]]) -> Spread {
     })
 }
 
-/// Eigenvalues of a symmetric 3x3 matrix, largest first, in closed form (the trigonometric
-/// solution of the characteristic cubic). Absolute accuracy: a few ulps of the largest
-/// eigenvalue, except that two nearly equal eigenvalues are only good to about 1e-8 of it
-/// (acos is ill-conditioned there); the callers compare ratios with thresholds far from both.
+/// Eigenvalues of a symmetric 3x3 matrix, largest first.
+///
+/// The trigonometric solution of the characteristic cubic gives the most isolated eigenvalue
+/// to a few ulps of the largest; the other two come from the invariants (their sum is the
+/// trace minus it, their product the sum of principal 2x2 minors minus it times their sum),
+/// which stays accurate when two eigenvalues nearly coincide (points on a line or a plane),
+/// where `acos` is ill-conditioned. The matrix is scaled to a largest entry of 1 first, so that
+/// no square overflows or underflows.
 pub fn sym3_eigenvalues(a: &Matrix3<f64>) -> [f64; 3] {
-    // scaled to a largest entry of 1, so that the squares below cannot overflow or underflow
     let m = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if !(m > 0.0 && m.is_finite()) {
         let mut d = [a[(0, 0)], a[(1, 1)], a[(2, 2)]];
@@ -199,7 +227,8 @@ pub fn sym3_eigenvalues(a: &Matrix3<f64>) -> [f64; 3] {
     }
     let a = a / m;
     let p1 = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
-    let q = a.trace() / 3.0;
+    let tr = a.trace();
+    let q = tr / 3.0;
     let p2 = (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * p1;
     let p = (p2 / 6.0).sqrt();
     if !(p > 0.0) {
@@ -210,9 +239,34 @@ pub fn sym3_eigenvalues(a: &Matrix3<f64>) -> [f64; 3] {
     let b = (a - Matrix3::identity() * q) / p;
     let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
     let phi = r.acos() / 3.0;
-    let e1 = q + 2.0 * p * phi.cos();
-    let e3 = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
-    [e1 * m, (3.0 * q - e1 - e3) * m, e3 * m]
+    // sum of the principal 2x2 minors: l1 l2 + l1 l3 + l2 l3
+    let minors = a[(0, 0)] * a[(1, 1)] - a[(0, 1)].powi(2) + a[(0, 0)] * a[(2, 2)]
+        - a[(0, 2)].powi(2)
+        + a[(1, 1)] * a[(2, 2)]
+        - a[(1, 2)].powi(2);
+    // the other two as the roots of x² - s x + prod, the larger first
+    let pair = |isolated: f64| {
+        let s = tr - isolated;
+        let prod = minors - isolated * s;
+        let big = 0.5 * (s + (s * s - 4.0 * prod).max(0.0).sqrt());
+        let small = if big > 0.0 && prod > 0.0 {
+            (prod / big).min(big)
+        } else {
+            s - big
+        };
+        (big, small)
+    };
+    let out = if r >= 0.0 {
+        // the largest is the isolated one
+        let e1 = q + 2.0 * p * phi.cos();
+        let (e2, e3) = pair(e1);
+        [e1, e2, e3]
+    } else {
+        let e3 = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+        let (e1, e2) = pair(e3);
+        [e1, e2, e3]
+    };
+    out.map(|v| v * m)
 }
 
 /// Fails unless the points span all three dimensions.

@@ -21,7 +21,7 @@
 //! [`Arith`]: the AVX2 build (see `simd`) uses fused multiply-adds, the portable build plain
 //! ones (so that it never calls a software `fma`).
 
-use crate::simd;
+use crate::simd::{arr3, dispatch, Simd};
 use rayon::prelude::*;
 
 /// Points per group (one AVX2 register of doubles per quantity).
@@ -33,34 +33,6 @@ pub(crate) const CHUNK: usize = 4096;
 /// A pass runs on several threads only above this many points: below it, the cost of waking
 /// the pool exceeds the gain.
 pub(crate) const PARALLEL_ABOVE: usize = 3 * CHUNK;
-
-/// Multiply-add: fused on the AVX2 + FMA build, separate on the portable one.
-pub(crate) trait Arith: Copy {
-    /// `a * b + c`.
-    fn fma(a: f64, b: f64, c: f64) -> f64;
-}
-
-/// Fused multiply-add (one rounding): compiled to `vfmadd` in the AVX2 + FMA build.
-#[derive(Clone, Copy)]
-pub(crate) struct Fused;
-
-/// Separate multiply and add, for CPUs without FMA (where `mul_add` is a library call).
-#[derive(Clone, Copy)]
-pub(crate) struct Separate;
-
-impl Arith for Fused {
-    #[inline(always)]
-    fn fma(a: f64, b: f64, c: f64) -> f64 {
-        a.mul_add(b, c)
-    }
-}
-
-impl Arith for Separate {
-    #[inline(always)]
-    fn fma(a: f64, b: f64, c: f64) -> f64 {
-        a * b + c
-    }
-}
 
 /// The fixed inputs of one pass.
 #[derive(Clone, Copy, Debug)]
@@ -164,276 +136,312 @@ impl<const P: usize> Sums<P> {
     }
 }
 
-/// Lane-wise accumulators of one thread.
-struct Lanes<const P: usize> {
-    jtj: [[[f64; LANES]; P]; P],
-    jtr0: [[f64; LANES]; P],
-    jtc: [[f64; LANES]; P],
-    r0r0: [f64; LANES],
-    r0c: [f64; LANES],
-    cc: [f64; LANES],
-    wq: [f64; LANES],
-    dd: [[f64; LANES]; 6],
-    faces: [[f64; LANES]; 6],
-    count: [f64; LANES],
+/// Entries of the packed upper triangle of a `P x P` matrix (at most 9 x 9).
+const PACKED: usize = 45;
+
+/// Index of `(a, b)`, `a <= b`, in the packed upper triangle of a `P x P` matrix.
+#[inline(always)]
+const fn packed(p: usize, a: usize, b: usize) -> usize {
+    a * p - a * a.saturating_sub(1) / 2 - if a > 0 { a } else { 0 } + b
 }
 
-impl<const P: usize> Lanes<P> {
+/// Lane-wise accumulators of one thread other than `JᵀJ` (`S::V` holds one value per lane).
+/// Kept small: a zeroed struct above 2 KiB costs a `rep stosb`, which instruction counts see
+/// as one instruction per byte.
+struct Lanes<S: Simd, const P: usize> {
+    jtr0: [S::V; P],
+    jtc: [S::V; P],
+    r0r0: S::V,
+    r0c: S::V,
+    cc: S::V,
+    wq: S::V,
+    dd: [S::V; 6],
+    faces: [S::V; 6],
+    count: S::V,
+}
+
+impl<S: Simd, const P: usize> Lanes<S, P> {
     #[inline(always)]
-    fn zero() -> Self {
+    fn zero(s: S) -> Self {
+        let z = s.zero();
         Lanes {
-            jtj: [[[0.0; LANES]; P]; P],
-            jtr0: [[0.0; LANES]; P],
-            jtc: [[0.0; LANES]; P],
-            r0r0: [0.0; LANES],
-            r0c: [0.0; LANES],
-            cc: [0.0; LANES],
-            wq: [0.0; LANES],
-            dd: [[0.0; LANES]; 6],
-            faces: [[0.0; LANES]; 6],
-            count: [0.0; LANES],
+            jtr0: [z; P],
+            jtc: [z; P],
+            r0r0: z,
+            r0c: z,
+            cc: z,
+            wq: z,
+            dd: [z; 6],
+            faces: [z; 6],
+            count: z,
         }
     }
 
     #[inline(always)]
-    fn sum(&self, want: Want) -> Sums<P> {
-        let s = |a: &[f64; LANES]| (a[0] + a[1]) + (a[2] + a[3]);
+    fn sum(&self, s: S, jtj: &[S::V; PACKED], want: Want) -> Sums<P> {
         let mut out = Sums::zero();
         for i in 0..P {
             if want.jtj {
                 for j in i..P {
-                    out.jtj[i][j] = s(&self.jtj[i][j]);
+                    out.jtj[i][j] = s.sum(jtj[packed(P, i, j)]);
                 }
             }
-            out.jtr0[i] = s(&self.jtr0[i]);
+            out.jtr0[i] = s.sum(self.jtr0[i]);
             if want.debias {
-                out.jtc[i] = s(&self.jtc[i]);
+                out.jtc[i] = s.sum(self.jtc[i]);
             }
         }
-        out.r0r0 = s(&self.r0r0);
-        out.r0c = s(&self.r0c);
-        out.cc = s(&self.cc);
-        out.wq = s(&self.wq);
+        out.r0r0 = s.sum(self.r0r0);
+        out.r0c = s.sum(self.r0c);
+        out.cc = s.sum(self.cc);
+        out.wq = s.sum(self.wq);
         if want.coverage {
             for k in 0..6 {
-                out.dd[k] = s(&self.dd[k]);
-                out.faces[k] = s(&self.faces[k]);
+                out.dd[k] = s.sum(self.dd[k]);
+                out.faces[k] = s.sum(self.faces[k]);
             }
-            out.count = s(&self.count);
+            out.count = s.sum(self.count);
         }
         out
     }
 }
 
-/// One group of [`LANES`] points: `x[k][l]` is coordinate `k` of lane `l`; `wt[l]` is 1 for a
-/// point and 0 for padding.
+/// Groups of [`LANES`] points whose Jacobian rows are computed before they are summed into
+/// `JᵀJ`, so that each row of `JᵀJ` is summed with its accumulators in registers.
+const BLOCK: usize = 8;
+
+/// One group's Jacobian rows (one vector per parameter), plain residual and noise direction.
+struct Rows<S: Simd, const P: usize> {
+    j: [S::V; P],
+    r0: S::V,
+    c: S::V,
+}
+
+/// One group of [`LANES`] points (`x`: their x, y, z; `wt`: 1 for a point, 0 for padding, or
+/// `None` for a full group): its Jacobian rows, `r₀` and `c`; adds its scalar sums (and
+/// coverage) to `acc`.
 #[inline(always)]
-fn group<A: Arith, const P: usize, const JTJ: bool, const DEB: bool, const COV: bool>(
-    s: &Setup,
-    x: &[[f64; LANES]; 3],
-    wt: &[f64; LANES],
-    acc: &mut Lanes<P>,
-) {
-    let w = &s.w;
-    let mut u = [[0.0f64; LANES]; 3];
-    for k in 0..3 {
-        for l in 0..LANES {
-            u[k][l] = A::fma(x[k][l] - s.mean[k], s.inv_scale, -s.offset[k]);
-        }
-    }
-    let mut v = [[0.0f64; LANES]; 3];
-    let mut wv = [[0.0f64; LANES]; 3];
-    for i in 0..3 {
-        for l in 0..LANES {
-            v[i][l] = A::fma(
-                w[i][2],
-                u[2][l],
-                A::fma(w[i][1], u[1][l], w[i][0] * u[0][l]),
-            );
-        }
-    }
-    for i in 0..3 {
-        for l in 0..LANES {
-            wv[i][l] = A::fma(
-                w[i][2],
-                v[2][l],
-                A::fma(w[i][1], v[1][l], w[i][0] * v[0][l]),
-            );
-        }
-    }
-    let mut iv = [0.0f64; LANES];
-    let mut r0 = [0.0f64; LANES];
-    for l in 0..LANES {
-        let nn = A::fma(
-            v[2][l],
-            v[2][l],
-            A::fma(v[1][l], v[1][l], v[0][l] * v[0][l]),
-        );
-        let n = nn.sqrt();
-        iv[l] = if n > 0.0 { wt[l] / n } else { 0.0 };
-        r0[l] = (n - 1.0) * wt[l];
+fn group<S: Simd, const P: usize, const DEB: bool, const COV: bool>(
+    s: S,
+    k: &Consts<S>,
+    x: [S::V; 3],
+    wt: Option<S::V>,
+    acc: &mut Lanes<S, P>,
+) -> Rows<S, P> {
+    let w = &k.w;
+    let u = arr3!(|i| s.fma(s.sub(x[i], k.mean[i]), k.inv_scale, k.neg_offset[i]));
+    let v = arr3!(|i| s.fma(w[i][2], u[2], s.fma(w[i][1], u[1], s.mul(w[i][0], u[0]))));
+    let wv = arr3!(|i| s.fma(w[i][2], v[2], s.fma(w[i][1], v[1], s.mul(w[i][0], v[0]))));
+    let nn = s.fma(v[2], v[2], s.fma(v[1], v[1], s.mul(v[0], v[0])));
+    let n = s.sqrt(nn);
+    let one = k.one;
+    let mut iv = s.and(s.gt(n, s.zero()), s.div(one, n));
+    let mut r0 = s.sub(n, one);
+    if let Some(wt) = wt {
+        iv = s.mul(iv, wt);
+        r0 = s.mul(r0, wt);
     }
     // Jacobian row; vi = v / n is also the unit direction
-    let mut j = [[0.0f64; LANES]; P];
-    let mut vi = [[0.0f64; LANES]; 3];
-    for k in 0..3 {
-        for l in 0..LANES {
-            j[k][l] = -wv[k][l] * iv[l]; // offset_x, offset_y, offset_z
-            vi[k][l] = v[k][l] * iv[l];
-        }
+    let vi = arr3!(|i| s.mul(v[i], iv));
+    let niv = s.sub(s.zero(), iv);
+    let mut j = [s.zero(); P];
+    for i in 0..3 {
+        j[i] = s.mul(wv[i], niv); // offset_x, offset_y, offset_z
     }
     if P == 4 {
-        for l in 0..LANES {
-            // k (sphere)
-            j[3][l] = A::fma(
-                vi[2][l],
-                u[2][l],
-                A::fma(vi[1][l], u[1][l], vi[0][l] * u[0][l]),
-            );
-        }
+        j[3] = s.fma(vi[2], u[2], s.fma(vi[1], u[1], s.mul(vi[0], u[0]))); // k (sphere)
     } else {
         for a in 0..3 {
-            for l in 0..LANES {
-                j[3 + a][l] = vi[a][l] * u[a][l]; // diag_x, diag_y, diag_z
-            }
+            j[3 + a] = s.mul(vi[a], u[a]); // diag_x, diag_y, diag_z
         }
         if P == 9 {
-            for l in 0..LANES {
-                j[6][l] = A::fma(vi[0][l], u[1][l], vi[1][l] * u[0][l]); // offdiag_xy
-                j[7][l] = A::fma(vi[0][l], u[2][l], vi[2][l] * u[0][l]); // offdiag_xz
-                j[8][l] = A::fma(vi[1][l], u[2][l], vi[2][l] * u[1][l]); // offdiag_yz
-            }
+            j[6] = s.fma(vi[0], u[1], s.mul(vi[1], u[0])); // offdiag_xy
+            j[7] = s.fma(vi[0], u[2], s.mul(vi[2], u[0])); // offdiag_xz
+            j[8] = s.fma(vi[1], u[2], s.mul(vi[2], u[1])); // offdiag_yz
         }
     }
-    let mut c = [0.0f64; LANES];
-    for l in 0..LANES {
-        let wq = A::fma(
-            j[2][l],
-            j[2][l],
-            A::fma(j[1][l], j[1][l], j[0][l] * j[0][l]),
-        );
-        acc.wq[l] += wq;
-        acc.r0r0[l] = A::fma(r0[l], r0[l], acc.r0r0[l]);
-        if DEB {
-            c[l] = (s.trw2 + wq) * wt[l];
-            acc.r0c[l] = A::fma(r0[l], c[l], acc.r0c[l]);
-            acc.cc[l] = A::fma(c[l], c[l], acc.cc[l]);
+    let wq = s.fma(j[2], j[2], s.fma(j[1], j[1], s.mul(j[0], j[0])));
+    acc.wq = s.add(acc.wq, wq);
+    acc.r0r0 = s.fma(r0, r0, acc.r0r0);
+    let mut c = s.zero();
+    if DEB {
+        c = s.add(k.trw2, wq);
+        if let Some(wt) = wt {
+            c = s.mul(c, wt);
         }
-    }
-    for a in 0..P {
-        for l in 0..LANES {
-            acc.jtr0[a][l] = A::fma(j[a][l], r0[l], acc.jtr0[a][l]);
-        }
-        if DEB {
-            for l in 0..LANES {
-                acc.jtc[a][l] = A::fma(j[a][l], c[l], acc.jtc[a][l]);
-            }
-        }
-        if JTJ {
-            for b in a..P {
-                for l in 0..LANES {
-                    acc.jtj[a][b][l] = A::fma(j[a][l], j[b][l], acc.jtj[a][b][l]);
-                }
-            }
-        }
+        acc.r0c = s.fma(r0, c, acc.r0c);
+        acc.cc = s.fma(c, c, acc.cc);
     }
     if COV {
-        let d = &vi;
-        for l in 0..LANES {
-            acc.dd[0][l] = A::fma(d[0][l], d[0][l], acc.dd[0][l]);
-            acc.dd[1][l] = A::fma(d[1][l], d[1][l], acc.dd[1][l]);
-            acc.dd[2][l] = A::fma(d[2][l], d[2][l], acc.dd[2][l]);
-            acc.dd[3][l] = A::fma(d[0][l], d[1][l], acc.dd[3][l]);
-            acc.dd[4][l] = A::fma(d[0][l], d[2][l], acc.dd[4][l]);
-            acc.dd[5][l] = A::fma(d[1][l], d[2][l], acc.dd[5][l]);
-            // the face the direction is closest to (ties go to the lower axis)
-            let (ax, ay, az) = (d[0][l].abs(), d[1][l].abs(), d[2][l].abs());
-            let on = if iv[l] > 0.0 { 1.0 } else { 0.0 };
-            let is_x = ax >= ay && ax >= az;
-            let is_y = !is_x && ay >= az;
-            let is_z = !is_x && !is_y;
-            let fx = if is_x { on } else { 0.0 };
-            let fy = if is_y { on } else { 0.0 };
-            let fz = if is_z { on } else { 0.0 };
-            let (px, py, pz) = (d[0][l] >= 0.0, d[1][l] >= 0.0, d[2][l] >= 0.0);
-            acc.faces[0][l] += if px { fx } else { 0.0 };
-            acc.faces[1][l] += if px { 0.0 } else { fx };
-            acc.faces[2][l] += if py { fy } else { 0.0 };
-            acc.faces[3][l] += if py { 0.0 } else { fy };
-            acc.faces[4][l] += if pz { fz } else { 0.0 };
-            acc.faces[5][l] += if pz { 0.0 } else { fz };
-            acc.count[l] += on;
-        }
+        let d = vi;
+        acc.dd[0] = s.fma(d[0], d[0], acc.dd[0]);
+        acc.dd[1] = s.fma(d[1], d[1], acc.dd[1]);
+        acc.dd[2] = s.fma(d[2], d[2], acc.dd[2]);
+        acc.dd[3] = s.fma(d[0], d[1], acc.dd[3]);
+        acc.dd[4] = s.fma(d[0], d[2], acc.dd[4]);
+        acc.dd[5] = s.fma(d[1], d[2], acc.dd[5]);
+        // the face each direction is closest to (ties go to the lower axis): masks, then 1.0
+        let on = s.and(s.gt(iv, s.zero()), one);
+        let (ax, ay, az) = (s.abs(d[0]), s.abs(d[1]), s.abs(d[2]));
+        let is_x = s.and(s.ge(ax, ay), s.ge(ax, az));
+        let is_y = s.andnot(is_x, s.ge(ay, az));
+        let fx = s.and(is_x, on);
+        let fy = s.and(is_y, on);
+        let fz = s.andnot(is_y, s.andnot(is_x, on));
+        let zero = s.zero();
+        let (px, py, pz) = (s.ge(d[0], zero), s.ge(d[1], zero), s.ge(d[2], zero));
+        acc.faces[0] = s.add(acc.faces[0], s.and(px, fx));
+        acc.faces[1] = s.add(acc.faces[1], s.andnot(px, fx));
+        acc.faces[2] = s.add(acc.faces[2], s.and(py, fy));
+        acc.faces[3] = s.add(acc.faces[3], s.andnot(py, fy));
+        acc.faces[4] = s.add(acc.faces[4], s.and(pz, fz));
+        acc.faces[5] = s.add(acc.faces[5], s.andnot(pz, fz));
+        acc.count = s.add(acc.count, on);
     }
+    Rows { j, r0, c }
+}
+
+/// Adds the `G` groups `rows` to `Jᵀr₀` (and `Jᵀc`, and `JᵀJ`): for each row `a` of `JᵀJ`
+/// the accumulators of that row stay in registers across the groups.
+#[inline(always)]
+fn sum_block<S: Simd, const P: usize, const G: usize, const JTJ: bool, const DEB: bool>(
+    s: S,
+    rows: &[Rows<S, P>; G],
+    acc: &mut Lanes<S, P>,
+    jtj: &mut [S::V; PACKED],
+) {
+    macro_rules! row {
+        ($a:literal) => {
+            if $a < P {
+                let mut jr = s.zero();
+                let mut jc = s.zero();
+                let mut rowv = [s.zero(); P];
+                for g in 0..G {
+                    let ja = rows[g].j[$a];
+                    jr = s.fma(ja, rows[g].r0, jr);
+                    if DEB {
+                        jc = s.fma(ja, rows[g].c, jc);
+                    }
+                    if JTJ {
+                        for b in $a..P {
+                            rowv[b] = s.fma(ja, rows[g].j[b], rowv[b]);
+                        }
+                    }
+                }
+                acc.jtr0[$a] = s.add(acc.jtr0[$a], jr);
+                if DEB {
+                    acc.jtc[$a] = s.add(acc.jtc[$a], jc);
+                }
+                if JTJ {
+                    for b in $a..P {
+                        let i = packed(P, $a, b);
+                        jtj[i] = s.add(jtj[i], rowv[b]);
+                    }
+                }
+            }
+        };
+    }
+    row!(0);
+    row!(1);
+    row!(2);
+    row!(3);
+    row!(4);
+    row!(5);
+    row!(6);
+    row!(7);
+    row!(8);
+}
+
+/// The pass's constants as vectors.
+struct Consts<S: Simd> {
+    mean: [S::V; 3],
+    inv_scale: S::V,
+    neg_offset: [S::V; 3],
+    w: [[S::V; 3]; 3],
+    trw2: S::V,
+    one: S::V,
 }
 
 #[inline(always)]
-fn load(p: &[[f64; 3]]) -> [[f64; LANES]; 3] {
-    let mut x = [[0.0f64; LANES]; 3];
-    for l in 0..LANES {
-        let q = p[l.min(p.len() - 1)];
-        for k in 0..3 {
-            x[k][l] = q[k];
-        }
-    }
-    x
-}
-
-#[inline(always)]
-fn run<A: Arith, const P: usize, const JTJ: bool, const DEB: bool, const COV: bool>(
+fn run<S: Simd, const P: usize, const JTJ: bool, const DEB: bool, const COV: bool>(
+    s: S,
     points: &[[f64; 3]],
-    s: &Setup,
+    setup: &Setup,
 ) -> Sums<P> {
-    let mut acc = Lanes::<P>::zero();
-    let groups = points.chunks_exact(LANES);
-    let rest = groups.remainder();
-    for g in groups {
-        group::<A, P, JTJ, DEB, COV>(s, &load(g), &[1.0; LANES], &mut acc);
+    let k = Consts::<S> {
+        mean: arr3!(|i| s.splat(setup.mean[i])),
+        inv_scale: s.splat(setup.inv_scale),
+        neg_offset: arr3!(|i| s.splat(-setup.offset[i])),
+        w: arr3!(|i| arr3!(|j| s.splat(setup.w[i][j]))),
+        trw2: s.splat(setup.trw2),
+        one: s.splat(1.0),
+    };
+    let mut acc = Lanes::<S, P>::zero(s);
+    let mut jtj = [s.zero(); PACKED];
+    let (groups, rest) = points.as_chunks::<LANES>();
+    let (blocks, tail) = groups.as_chunks::<BLOCK>();
+    for b in blocks {
+        macro_rules! g {
+            ($g:literal) => {
+                group::<S, P, DEB, COV>(s, &k, s.load_xyz(&b[$g]), None, &mut acc)
+            };
+        }
+        let rows = [g!(0), g!(1), g!(2), g!(3), g!(4), g!(5), g!(6), g!(7)];
+        sum_block::<S, P, BLOCK, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
+    }
+    for grp in tail {
+        let rows = [group::<S, P, DEB, COV>(
+            s,
+            &k,
+            s.load_xyz(grp),
+            None,
+            &mut acc,
+        )];
+        sum_block::<S, P, 1, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
     }
     if !rest.is_empty() {
         let mut wt = [0.0; LANES];
         wt[..rest.len()].fill(1.0);
-        group::<A, P, JTJ, DEB, COV>(s, &load(rest), &wt, &mut acc);
+        let mut grp = [rest[0]; LANES];
+        grp[..rest.len()].copy_from_slice(rest);
+        let wt = Some(s.vector(wt));
+        let rows = [group::<S, P, DEB, COV>(
+            s,
+            &k,
+            s.load_xyz(&grp),
+            wt,
+            &mut acc,
+        )];
+        sum_block::<S, P, 1, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
     }
-    acc.sum(Want {
-        jtj: JTJ,
-        debias: DEB,
-        coverage: COV,
-    })
-}
-
-macro_rules! dispatch_flags {
-    ($arith:ty, $points:expr, $s:expr, $want:expr) => {
-        match ($want.jtj, $want.debias, $want.coverage) {
-            (true, true, true) => run::<$arith, P, true, true, true>($points, $s),
-            (true, true, false) => run::<$arith, P, true, true, false>($points, $s),
-            (true, false, true) => run::<$arith, P, true, false, true>($points, $s),
-            (true, false, false) => run::<$arith, P, true, false, false>($points, $s),
-            (false, true, true) => run::<$arith, P, false, true, true>($points, $s),
-            (false, true, false) => run::<$arith, P, false, true, false>($points, $s),
-            (false, false, true) => run::<$arith, P, false, false, true>($points, $s),
-            (false, false, false) => run::<$arith, P, false, false, false>($points, $s),
-        }
-    };
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn run_avx2<const P: usize>(points: &[[f64; 3]], s: &Setup, want: Want) -> Sums<P> {
-    dispatch_flags!(Fused, points, s, want)
-}
-
-fn run_portable<const P: usize>(points: &[[f64; 3]], s: &Setup, want: Want) -> Sums<P> {
-    dispatch_flags!(Separate, points, s, want)
+    acc.sum(
+        s,
+        &jtj,
+        Want {
+            jtj: JTJ,
+            debias: DEB,
+            coverage: COV,
+        },
+    )
 }
 
 /// One pass over `points` on the calling thread.
 pub(crate) fn pass_serial<const P: usize>(points: &[[f64; 3]], s: &Setup, want: Want) -> Sums<P> {
-    #[cfg(target_arch = "x86_64")]
-    if simd::has_avx2_fma() {
-        return simd::avx2_call!(run_avx2::<P>(points, s, want));
+    macro_rules! go {
+        ($j:literal, $d:literal, $c:literal) => {
+            dispatch!(|simd| run::<_, P, $j, $d, $c>(simd, points, s))
+        };
     }
-    run_portable::<P>(points, s, want)
+    match (want.jtj, want.debias, want.coverage) {
+        (true, true, true) => go!(true, true, true),
+        (true, true, false) => go!(true, true, false),
+        (true, false, true) => go!(true, false, true),
+        (true, false, false) => go!(true, false, false),
+        (false, true, true) => go!(false, true, true),
+        (false, true, false) => go!(false, true, false),
+        (false, false, true) => go!(false, false, true),
+        (false, false, false) => go!(false, false, false),
+    }
 }
 
 /// One pass over `points`, on the rayon pool when `parallel` and there are enough of them.

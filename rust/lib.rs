@@ -21,6 +21,7 @@ pub mod ellipsoid;
 pub mod error;
 pub mod geometry;
 mod kernel;
+mod linalg;
 mod simd;
 pub mod sphere;
 

@@ -11,8 +11,7 @@
 
 use crate::error::{check_positive, CalError, Result};
 use crate::geometry;
-use crate::kernel::{Arith, Fused, Separate};
-use crate::simd;
+use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{Matrix4, Vector3, Vector4};
 use rayon::prelude::*;
 
@@ -141,38 +140,39 @@ fn error_sum(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
 
 /// `Σ |‖p - c‖² - r2|` on the calling thread (AVX2 + FMA when the CPU has them).
 fn error_sum_serial(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if simd::has_avx2_fma() {
-        return simd::avx2_call!(error_sum_avx2(points, c, r2));
-    }
-    error_sum_lanes::<Separate>(points, c, r2)
+    dispatch!(|simd| error_sum_lanes(simd, points, c, r2))
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn error_sum_avx2(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
-    error_sum_lanes::<Fused>(points, c, r2)
-}
-
-/// Eight independent partial sums, so that the additions pipeline and vectorise.
+/// `|‖p - c‖² - r2|` of a group of four points.
 #[inline(always)]
-fn error_sum_lanes<A: Arith>(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
-    const L: usize = 8;
-    let mut acc = [0.0f64; L];
-    let groups = points.chunks_exact(L);
-    let rest = groups.remainder();
-    for g in groups {
-        for l in 0..L {
-            let (x, y, z) = (g[l][0] - c[0], g[l][1] - c[1], g[l][2] - c[2]);
-            acc[l] += (A::fma(z, z, A::fma(y, y, x * x)) - r2).abs();
-        }
+fn error_term<S: Simd>(s: S, g: &[[f64; 3]; 4], c: &[S::V; 3], r2: S::V) -> S::V {
+    let x = s.load_xyz(g);
+    let d = arr3!(|k| s.sub(x[k], c[k]));
+    s.abs(s.sub(s.fma(d[2], d[2], s.fma(d[1], d[1], s.mul(d[0], d[0]))), r2))
+}
+
+/// Two groups of four points at a time, each with its own partial sums.
+#[inline(always)]
+fn error_sum_lanes<S: Simd>(s: S, points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
+    let cv = arr3!(|k| s.splat(c[k]));
+    let r2v = s.splat(r2);
+    let term = |g: &[[f64; 3]; 4]| error_term(s, g, &cv, r2v);
+    let (groups, rest) = points.as_chunks::<4>();
+    let (pairs, odd) = groups.as_chunks::<2>();
+    let (mut a0, mut a1) = (s.zero(), s.zero());
+    for p in pairs {
+        a0 = s.add(a0, term(&p[0]));
+        a1 = s.add(a1, term(&p[1]));
+    }
+    for g in odd {
+        a0 = s.add(a0, term(g));
     }
     let mut tail = 0.0;
     for p in rest {
         let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-        tail += (A::fma(z, z, A::fma(y, y, x * x)) - r2).abs();
+        tail += (x * x + y * y + z * z - r2).abs();
     }
-    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
+    s.sum(s.add(a0, a1)) + tail
 }
 
 /// The 26 neighbour offsets in units of the step, in a fixed order: x-major, then y, then z,
@@ -244,49 +244,7 @@ impl NeighbourSums {
 
 fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26] {
     let h2 = h * h;
-    let part = |chunk: &[[f64; 3]]| -> NeighbourSums {
-        let mut acc = NeighbourSums::zero();
-        for p in chunk {
-            let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-            let s = x * x + y * y + z * z - r2;
-            let (a, b, cc) = (2.0 * h * x, 2.0 * h * y, 2.0 * h * z);
-            let reach = a.abs() + b.abs() + cc.abs();
-            if s > reach {
-                // positive everywhere in the neighbourhood (h² n >= 0 only adds)
-                acc.m[0] += s;
-                acc.m[1] += a;
-                acc.m[2] += b;
-                acc.m[3] += cc;
-                acc.m[4] += 1.0;
-            } else if s < -reach - 3.0 * h2 {
-                acc.m[0] -= s;
-                acc.m[1] -= a;
-                acc.m[2] -= b;
-                acc.m[3] -= cc;
-                acc.m[4] -= 1.0;
-            } else {
-                // e(i, j, k) = A_i + B_j + C_k with A_i = s - i a + h² i², B_j = -j b + h² j²,
-                // C_k = -k c + h² k², for i, j, k in -1, 0, 1 (NEIGHBOURS' order, centre skipped)
-                let aa = [s + a + h2, s, s - a + h2];
-                let bb = [b + h2, 0.0, -b + h2];
-                let ck = [cc + h2, 0.0, -cc + h2];
-                let mut t = 0;
-                for (ii, ai) in aa.iter().enumerate() {
-                    for (jj, bj) in bb.iter().enumerate() {
-                        let ab = ai + bj;
-                        for (kk, ckk) in ck.iter().enumerate() {
-                            if ii == 1 && jj == 1 && kk == 1 {
-                                continue;
-                            }
-                            acc.direct[t] += (ab + ckk).abs();
-                            t += 1;
-                        }
-                    }
-                }
-            }
-        }
-        acc
-    };
+    let part = |chunk: &[[f64; 3]]| dispatch!(|simd| neighbour_part(simd, chunk, c, r2, h));
     let sums = if points.len() < 2 * CHUNK {
         part(points)
     } else {
@@ -296,6 +254,86 @@ fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26
             .reduce(NeighbourSums::zero, NeighbourSums::add)
     };
     sums.totals(h2)
+}
+
+/// The 26 neighbours as 7 vectors of 4 lanes (the last two lanes are padding): `(i, j, k)`
+/// negated, and `i² + j² + k²`.
+const NEIGHBOUR_LANES: usize = 28;
+
+fn neighbour_table() -> [[f64; NEIGHBOUR_LANES]; 4] {
+    let mut t = [[0.0; NEIGHBOUR_LANES]; 4];
+    for (m, d) in NEIGHBOURS.iter().enumerate() {
+        let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
+        t[0][m] = -i;
+        t[1][m] = -j;
+        t[2][m] = -k;
+        t[3][m] = i * i + j * j + k * k;
+    }
+    t
+}
+
+/// [`NeighbourSums`] of `points` about the centre `c`: points far from the sphere (their error
+/// keeps its sign over the whole neighbourhood) add to the moments; the others are evaluated at
+/// all 26 neighbours at once, four neighbours per vector.
+#[inline(always)]
+fn neighbour_part<S: Simd>(
+    s: S,
+    points: &[[f64; 3]],
+    c: [f64; 3],
+    r2: f64,
+    h: f64,
+) -> NeighbourSums {
+    let h2 = h * h;
+    let t = neighbour_table();
+    let vec = |row: &[f64; NEIGHBOUR_LANES], m: usize| {
+        s.vector([row[4 * m], row[4 * m + 1], row[4 * m + 2], row[4 * m + 3]])
+    };
+    let ni: [S::V; 7] = std::array::from_fn(|m| vec(&t[0], m));
+    let nj: [S::V; 7] = std::array::from_fn(|m| vec(&t[1], m));
+    let nk: [S::V; 7] = std::array::from_fn(|m| vec(&t[2], m));
+    let hn: [S::V; 7] = std::array::from_fn(|m| s.mul(vec(&t[3], m), s.splat(h2)));
+    let mut direct = [s.zero(); 7];
+    let mut acc = NeighbourSums::zero();
+    for p in points {
+        let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+        let e0 = x * x + y * y + z * z - r2;
+        let (a, b, cc) = (2.0 * h * x, 2.0 * h * y, 2.0 * h * z);
+        let reach = a.abs() + b.abs() + cc.abs();
+        if e0 > reach {
+            // positive everywhere in the neighbourhood (h² n >= 0 only adds)
+            acc.m[0] += e0;
+            acc.m[1] += a;
+            acc.m[2] += b;
+            acc.m[3] += cc;
+            acc.m[4] += 1.0;
+        } else if e0 < -reach - 3.0 * h2 {
+            acc.m[0] -= e0;
+            acc.m[1] -= a;
+            acc.m[2] -= b;
+            acc.m[3] -= cc;
+            acc.m[4] -= 1.0;
+        } else {
+            // e(i, j, k) = e0 - i a - j b - k c + h² (i² + j² + k²)
+            let (va, vb, vc, ve) = (s.splat(a), s.splat(b), s.splat(cc), s.splat(e0));
+            for m in 0..7 {
+                let e = s.fma(
+                    ni[m],
+                    va,
+                    s.fma(nj[m], vb, s.fma(nk[m], vc, s.add(ve, hn[m]))),
+                );
+                direct[m] = s.add(direct[m], s.abs(e));
+            }
+        }
+    }
+    for m in 0..7 {
+        let d = s.to_array(direct[m]);
+        for l in 0..4 {
+            if 4 * m + l < 26 {
+                acc.direct[4 * m + l] = d[l];
+            }
+        }
+    }
+    acc
 }
 
 /// Variable-step 26-neighbour descent for the centre of a sphere of known `radius`.

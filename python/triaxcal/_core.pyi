@@ -47,7 +47,6 @@ def grid_center(
 def fit_sphere_linear(points: _Points) -> tuple[_Vec3, float, float]: ...
 def fit_ellipsoid(
     points: _Points,
-    *,
     model: str,
     radius: float | None,
     max_iter: int,
@@ -55,11 +54,12 @@ def fit_ellipsoid(
     method: str,
     debias: bool,
     fixed: list[float | None] | None = None,
-) -> dict[str, Any]: ...
+) -> tuple[
+    str, npt.NDArray[np.float64], float, float, float, int, bool, int, tuple[str, ...]
+]: ...
 def fit_batch(
     points: _Points,
     bounds: npt.NDArray[np.int64],
-    *,
     model: str,
     radius: float | None,
     max_iter: int,

@@ -10,6 +10,7 @@ soft-iron terms (``offdiag``).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -46,6 +47,14 @@ __all__ = [
 
 MODELS = ("sphere", "axis", "full")
 METHODS = ("lm", "gn", "algebraic")
+
+#: Names of the parameters whose standard errors ``EllipsoidFit.stderr`` holds, per model.
+PARAM_NAMES = {
+    "sphere": ("offset_x", "offset_y", "offset_z", "data_radius"),
+    "axis": ("offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z"),
+    "full": ("offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
+             "offdiag_xy", "offdiag_xz", "offdiag_yz"),
+}
 
 #: Most refinement steps a fit accepts (each is a pass over the points; fits take tens).
 MAX_ITER = 1_000_000
@@ -128,22 +137,21 @@ class EllipsoidFit:
     fixed: tuple[str, ...] = ()
 
     @classmethod
-    def _from_core(cls, d: dict, fixed: tuple[str, ...] = ()) -> EllipsoidFit:
-        return cls(
-            model=d["model"],
-            offset=_frozen(d["offset"]),
-            matrix=_frozen(d["matrix"]),
-            radius=float(d["radius"]),
-            rms=float(d["rms"]),
-            stderr=_frozen(d["stderr"]),
-            param_names=tuple(d["param_names"]),
-            iterations=int(d["iterations"]),
-            converged=bool(d["converged"]),
-            condition=float(d["condition"]),
-            n=int(d["n"]),
-            warnings=tuple(d["warnings"]),
-            fixed=fixed,
+    def _from_core(cls, t: tuple, fixed: tuple[str, ...] = ()) -> EllipsoidFit:
+        """From the core's tuple ``(model, values, radius, rms, condition, iterations,
+        converged, n, warnings)``; ``values`` holds offset, matrix and standard errors."""
+        model, v, radius, rms, condition, iterations, converged, n, warnings = t
+        v.flags.writeable = False  # its views below are read-only too
+        # filled in directly: the same fields the generated __init__ would set, without its
+        # per-field frozen-setattr cost (this runs once per fit, even of 10 points)
+        obj = object.__new__(cls)
+        obj.__dict__.update(
+            model=model, offset=v[:3], matrix=v[3:12].reshape(3, 3), radius=radius, rms=rms,
+            stderr=v[12:], param_names=PARAM_NAMES[model], iterations=iterations,
+            converged=converged, condition=condition, n=n, warnings=warnings,
+            model_reason=None, fixed=fixed,
         )
+        return obj
 
     def apply(self, points: Any) -> np.ndarray:
         """Calibrate raw readings: ``(points - offset) @ matrix.T``, shape (N, 3).
@@ -263,11 +271,10 @@ def fit_ellipsoid(
             fixed=fixed,
         )
         return replace(auto.fit, model_reason=auto.reason)
-    opts = _check_options(model, method, max_iter, radius, tol, debias, auto_ok=True)
-    fix, names = _fixed_vector(fixed, model, opts["radius"])
-    pts = as_points(points)
-    d = _core.fit_ellipsoid(pts, **opts, fixed=fix)
-    return EllipsoidFit._from_core(d, names)
+    opts = _options(model, radius, max_iter, tol, method, debias)
+    fix, names = _fixed_vector(fixed, model, opts[1]) if fixed else (None, ())
+    pts = points if _ready(points) else as_points(points)
+    return EllipsoidFit._from_core(_core.fit_ellipsoid(pts, *opts, fix), names)
 
 
 def fit_sphere(
@@ -387,8 +394,8 @@ def fit_batch(
         ``converged`` (B,), ``iterations`` (B,), ``errors`` (B,). One bad set reports its own
         error and does not spoil the others.
     """
-    opts = _check_options(model, method, max_iter, radius, tol, debias, auto_ok=False)
-    fix, _ = _fixed_vector(fixed, model, opts["radius"])
+    opts = _options(model, radius, max_iter, tol, method, debias)
+    fix, _ = _fixed_vector(fixed, model, opts[1])
     if isinstance(sets, np.ndarray) and sets.ndim == 3:
         if sets.shape[2] != 3:
             raise CalibrationError(f"sets must have shape (B, N, 3), got {sets.shape}")
@@ -405,7 +412,7 @@ def fit_batch(
         bounds = np.zeros(len(parts) + 1, dtype=np.int64)
         bounds[1:] = np.cumsum([len(p) for p in parts])
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
-    d = _core.fit_batch(flat, bounds, **opts, fixed=fix)
+    d = _core.fit_batch(flat, bounds, *opts, fix)
     for k in ("offsets", "matrices", "radii", "rms", "converged", "iterations"):
         d[k].setflags(write=False)
     return BatchFit(
@@ -515,24 +522,51 @@ def grid_center(points: Any, radius: float, *, lo: Any, hi: Any, step: float) ->
 
 
 def _check_options(
-    model: Any, method: Any, max_iter: Any, radius: Any, tol: Any, debias: Any, *, auto_ok: bool
-) -> dict[str, Any]:
-    """Validate the options shared by the fits; returns the core's keyword arguments."""
+    model: Any, radius: Any, max_iter: Any, tol: Any, method: Any, debias: Any
+) -> tuple[str, float | None, int, float, str, bool]:
+    """Validate the options shared by the fits: the core's arguments, in its order."""
     if not isinstance(model, str) or model not in MODELS:
         raise CalibrationError(
             f"unknown model {model!r}: use 'sphere' (offset only), 'axis' (offset + 3 gains), "
-            "'full' (offset + symmetric 3x3 matrix)" + (" or 'auto'" if auto_ok else "")
+            "'full' (offset + symmetric 3x3 matrix) or 'auto'"
         )
     if not isinstance(method, str) or method not in METHODS:
         raise CalibrationError(f"unknown method {method!r}: use one of {METHODS}")
-    return {
-        "model": model,
-        "radius": as_radius(radius),
-        "max_iter": as_count(max_iter, "max_iter", hi=MAX_ITER),
-        "tol": as_real(tol, "tol", lo=0, hi=1, hi_open=True),
-        "method": method,
-        "debias": as_flag(debias, "debias"),
-    }
+    return (
+        model,
+        as_radius(radius),
+        as_count(max_iter, "max_iter", hi=MAX_ITER),
+        as_real(tol, "tol", lo=0, hi=1, hi_open=True),
+        method,
+        as_flag(debias, "debias"),
+    )
+
+
+# The same options validate the same way: remember the last few (typed, so that True, 1 and
+# 1.0 are told apart). Unhashable values (a radius given as an array) skip the cache.
+_options_cached = functools.lru_cache(maxsize=64, typed=True)(_check_options)
+
+
+def _options(*args: Any) -> tuple[str, float | None, int, float, str, bool]:
+    try:
+        return _options_cached(*args)
+    except TypeError:  # unhashable
+        return _check_options(*args)
+
+
+_F64 = np.dtype(np.float64)
+
+
+def _ready(points: Any) -> bool:
+    """Whether ``points`` can go to the core as they are (an aligned, C-contiguous float64
+    (N, 3) array), so that the conversion in ``as_points`` can be skipped."""
+    return (
+        type(points) is np.ndarray
+        and points.dtype == _F64
+        and points.ndim == 2
+        and points.shape[1] == 3
+        and points.flags.carray
+    )
 
 
 def _fixed_vector(

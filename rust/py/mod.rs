@@ -12,8 +12,9 @@ use errors::{py_result, CalibrationError, DegenerateDataError, NonFiniteError, T
 use numpy::{
     PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
 };
+use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 
 /// Borrows an (N, 3) aligned, C-contiguous float64 array as points, without copying. (The
 /// Python facade converts anything else first: `triaxcal._validate.as_points`.)
@@ -50,24 +51,33 @@ fn descent_dict<'py>(py: Python<'py>, d: Descent) -> PyResult<Bound<'py, PyDict>
     Ok(out)
 }
 
-fn fit_dict<'py>(py: Python<'py>, f: EllipsoidFit) -> PyResult<Bound<'py, PyDict>> {
-    let out = PyDict::new(py);
-    out.set_item("model", f.model.name())?;
-    out.set_item("offset", f.offset.to_vec())?;
-    out.set_item(
-        "matrix",
-        f.matrix.iter().map(|r| r.to_vec()).collect::<Vec<_>>(),
-    )?;
-    out.set_item("radius", f.radius)?;
-    out.set_item("rms", f.rms)?;
-    out.set_item("stderr", f.stderr)?;
-    out.set_item("param_names", f.model.param_names().to_vec())?;
-    out.set_item("iterations", f.iterations)?;
-    out.set_item("converged", f.converged)?;
-    out.set_item("condition", f.condition)?;
-    out.set_item("n", f.n)?;
-    out.set_item("warnings", f.warnings)?;
-    Ok(out)
+/// A fit as a tuple `(model, values, radius, rms, condition, iterations, converged, n,
+/// warnings)`, `values` holding offset (3), matrix (9, row-major) and the standard errors: one
+/// array for the Python facade to view into.
+fn fit_tuple<'py>(py: Python<'py>, f: EllipsoidFit) -> PyResult<Bound<'py, PyTuple>> {
+    let mut values = Vec::with_capacity(12 + f.stderr.len());
+    values.extend_from_slice(&f.offset);
+    for row in &f.matrix {
+        values.extend_from_slice(row);
+    }
+    values.extend_from_slice(&f.stderr);
+    let model = match f.model {
+        Model::Sphere => intern!(py, "sphere"),
+        Model::Axis => intern!(py, "axis"),
+        Model::Full => intern!(py, "full"),
+    };
+    (
+        model,
+        PyArray1::from_vec(py, values),
+        f.radius,
+        f.rms,
+        f.condition,
+        f.iterations,
+        f.converged,
+        f.n,
+        PyTuple::new(py, f.warnings)?,
+    )
+        .into_pyobject(py)
 }
 
 fn options(
@@ -156,9 +166,10 @@ fn fit_sphere_linear(
     Ok((f.center, f.radius, f.rms))
 }
 
-/// Geometric ellipsoid fit; returns a dict of plain values.
+/// Geometric ellipsoid fit; returns a tuple of plain values (see `fit_tuple`). The options are
+/// positional: the facade (`triaxcal.fit`) passes them in this order.
 #[pyfunction]
-#[pyo3(signature = (points, *, model, radius, max_iter, tol, method, debias, fixed=None))]
+#[pyo3(signature = (points, model, radius, max_iter, tol, method, debias, fixed=None))]
 fn fit_ellipsoid<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
@@ -169,17 +180,17 @@ fn fit_ellipsoid<'py>(
     method: &str,
     debias: bool,
     fixed: Option<[Option<f64>; 9]>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Bound<'py, PyTuple>> {
     let pts = self::points(&points)?;
     let opts = options(model, radius, max_iter, tol, method, debias, fixed)?;
     let f = py_result(py.detach(|| ellipsoid::fit_ellipsoid(pts, &opts)))?;
-    fit_dict(py, f)
+    fit_tuple(py, f)
 }
 
 /// Fits many sets: `points` holds them back to back, set i is rows `bounds[i]..bounds[i+1]`.
 /// Returns (offsets (B,3), matrices (B,9), radii, rms, converged, iterations, errors).
 #[pyfunction]
-#[pyo3(signature = (points, bounds, *, model, radius, max_iter, tol, method, debias, fixed=None))]
+#[pyo3(signature = (points, bounds, model, radius, max_iter, tol, method, debias, fixed=None))]
 fn fit_batch<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
