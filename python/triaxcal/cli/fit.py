@@ -257,10 +257,14 @@ def _pose_points(table: Table, cols: list[int], args: argparse.Namespace) -> np.
 
 def fit_file(args: argparse.Namespace) -> FitOutcome:
     """Read ``args.data``, pick columns, optionally reduce to poses, fit robustly."""
+    return fit_table(read_table(args.data), args)
+
+
+def fit_table(table: Table, args: argparse.Namespace) -> FitOutcome:
+    """:func:`fit_file` on a table already read (``triaxcal batch`` fits each board so)."""
     from ..select import fit_robust
 
     sensor = args.sensor or "accel"
-    table = read_table(args.data)
     cols = pick_columns(table, args.columns, sensor)
     pts = _pose_points(table, cols, args) if args.poses else table.data[:, cols]
     if args.radius is not None:
