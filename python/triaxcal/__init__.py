@@ -40,6 +40,7 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .fleet.autocal import AutoCalibration, autocalibrate
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -132,4 +133,6 @@ __all__ = [
     "plot_report",
     "quality_report",
     "write_outputs",
+    "AutoCalibration",
+    "autocalibrate",
 ]

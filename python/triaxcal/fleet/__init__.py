@@ -11,6 +11,25 @@
 
 from __future__ import annotations
 
+from .autocal import (
+    AutoCalibration,
+    StillWindows,
+    WindowStats,
+    autocalibrate,
+    fit_still_windows,
+)
 from .batch import REASONS, BoardResult, Limits, batch_fit, fit_options, judge
 
-__all__ = ["REASONS", "BoardResult", "Limits", "batch_fit", "fit_options", "judge"]
+__all__ = [
+    "REASONS",
+    "AutoCalibration",
+    "BoardResult",
+    "Limits",
+    "StillWindows",
+    "WindowStats",
+    "autocalibrate",
+    "batch_fit",
+    "fit_options",
+    "fit_still_windows",
+    "judge",
+]

@@ -51,6 +51,7 @@ from .truth import (
     temp_c_from_raw,
     temp_raw_from_c,
 )
+from .wearable import FreeLivingSim, WearableTruth
 
 __all__ = [
     "ACCEL_COUNTS_PER_G",
@@ -61,6 +62,8 @@ __all__ = [
     "MODE_BYTES",
     "MAG_COUNTS_PER_UT",
     "Faults",
+    "FreeLivingSim",
+    "WearableTruth",
     "Recording",
     "Script",
     "SensorTruth",
