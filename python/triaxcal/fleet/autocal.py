@@ -317,7 +317,7 @@ class AutoCalibration:
         temp = None
         if self.temp_ref_c is not None and self.temp_range_c is not None:
             temp = TemperatureTerms(temp_ref_c=self.temp_ref_c, temp_range_c=self.temp_range_c,
-                                    offset_poly=[[0.0, 0.0, 0.0], self.temp_coef.tolist()])
+                                    offset_poly=np.vstack([np.zeros(3), self.temp_coef]))
         stats = {
             "method": "van Hees et al. 2014 (free-living, still 10 s windows)",
             "accepted": self.accepted,
@@ -371,7 +371,8 @@ def fit_still_windows(
                 "sphere_crit_g": sphere_crit_g, "max_error_g": max_error_g,
                 "max_iter": max_iter, "tol": tol, "min_hours": min_hours, "stop": stop}
     n = len(means)
-    base = dict(n_windows=stats.n_windows, n_still=n, hours=stats.hours, settings=settings)
+    base: dict[str, Any] = dict(n_windows=stats.n_windows, n_still=n, hours=stats.hours,
+                                settings=settings)
     if n < 2:
         r = AutoCalibration.failed(
             f"recalibration not done: {n} still {stats.window_s:g} s window(s) in "
