@@ -115,3 +115,29 @@ def test_without_dask_the_error_names_the_extra(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          check=True).stdout
     assert "pip install 'triaxcal[dask]'" in out
+
+
+def test_autocalibrate_many_one_task_per_recording(client, realdata):
+    import triaxcal.dask as tcd
+    from triaxcal.sim import FreeLivingSim
+
+    pytest.importorskip("pygt3x")
+    gt3x = realdata / "wearables-ggirread" / "actigraph_testfile.gt3x"
+    sims = [FreeLivingSim(seed=s, days=0.25, rate_hz=5.0) for s in (2, 4)]
+    arrays = [tuple(np.concatenate(x) for x in zip(*sim.chunks())) for sim in sims]
+    recs = [str(gt3x), arrays[0], arrays[1][0], str(gt3x.with_name("missing.gt3x"))]
+    with get_task_stream(client) as stream:
+        got = tcd.autocalibrate_many(recs, rate_hz=5.0, min_hours=0)
+    tasks = [t for t in stream.data if "autocalibrate_source" in t["key"]]
+    assert len(tasks) == 4
+    from triaxcal.io.wearables import read_wearable
+
+    rec = read_wearable(gt3x)
+    want = [tc.autocalibrate(rec.acc_g, rec.rate_hz, min_hours=0),
+            tc.autocalibrate(arrays[0][0], 5.0, arrays[0][1], min_hours=0),
+            tc.autocalibrate(arrays[1][0], 5.0, min_hours=0)]
+    for g, w in zip(got, want):
+        assert np.array_equal(g.offset, w.offset) and np.array_equal(g.gain, w.gain)
+        assert g.status == w.status and g.n_still == w.n_still
+    assert got[1].accepted and got[1].temp_ref_c is not None
+    assert not got[3].accepted and "not found" in got[3].status
