@@ -79,14 +79,25 @@ def test_fit_groups_from_parquet_equals_in_process(client, tmp_path):
     for k, rows in enumerate(np.array_split(np.arange(len(df)), 5)):
         df.iloc[rows].to_parquet(tmp_path / f"part{k}.parquet")
     frame = dd.read_parquet(str(tmp_path))
-    got = tcd.fit_groups(frame, by="device_id", columns=["ax", "ay", "az"], radius=1.0,
-                         model="axis")
+    with get_task_stream(client) as stream:
+        got = tcd.fit_groups(frame, by="device_id", columns=["ax", "ay", "az"], radius=1.0,
+                             model="axis")
+    assert any("shuffle" in str(t["key"]) for t in stream.data)  # devices were spread
     order = sorted(set(ids))
     sets = [df.loc[df.device_id == i, ["ax", "ay", "az"]].to_numpy() for i in order]
     want = tc.fit_batch(sets, radius=1.0, model="axis")
     assert got.ids == tuple(order)
     same(got, want)
     assert isinstance(got, tc.BatchFit)
+    # written one device per file, no shuffle is needed (and none is made): the same result
+    grouped = tmp_path / "grouped"
+    grouped.mkdir()
+    for k, dev in enumerate(order):
+        df[df.device_id == dev].to_parquet(grouped / f"{k:03d}.parquet")
+    with get_task_stream(client) as stream:
+        again = tcd.fit_groups(dd.read_parquet(str(grouped)), radius=1.0, model="axis")
+    assert not any("shuffle" in str(t["key"]) for t in stream.data)
+    same(again, want)
 
 
 def test_bad_input_is_a_calibration_error(client):

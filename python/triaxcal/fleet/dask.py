@@ -127,33 +127,43 @@ def fit_batch(sets: Any, *, compute: bool = True, **options: Any) -> Any:
     return result.compute() if compute else result
 
 
+_WIDE = ([f"offset_{a}" for a in "xyz"] + [f"m{i}{j}" for i in range(3) for j in range(3)]
+         + ["radius", "rms", "converged", "iterations", "error"])
+
+
 def _fit_partition(df: Any, by: str, columns: Sequence[str], opts: dict[str, Any]) -> Any:
     """Fit every device of one partition (all its rows are here); one row per device."""
     import pandas as pd
 
-    rows = []
-    if len(df):
-        df = df.sort_values([by, "_row"], kind="stable")
-        keys = df[by].to_numpy()
-        cut = np.flatnonzero(keys[1:] != keys[:-1]) + 1
-        starts = np.r_[0, cut]
-        ends = np.r_[cut, len(df)]
-        pts = df[list(columns)].to_numpy(dtype=np.float64)
-        sets = [pts[s:e] for s, e in zip(starts, ends)]
-        res = _fit_batch(sets, **opts)
-        for i, s in enumerate(starts):
-            rows.append({
-                by: keys[s],
-                "offsets": res.offsets[i].tolist(),
-                "matrices": res.matrices[i].ravel().tolist(),
-                "radii": float(res.radii[i]),
-                "rms": float(res.rms[i]),
-                "converged": bool(res.converged[i]),
-                "iterations": int(res.iterations[i]),
-                "errors": res.errors[i],
-            })
-    return pd.DataFrame(rows, columns=[by, "offsets", "matrices", "radii", "rms",
-                                       "converged", "iterations", "errors"])
+    codes, uniques = pd.factorize(df[by], sort=True)
+    order = np.lexsort((df["_row"].to_numpy(), codes))
+    codes = codes[order]
+    pts = df[list(columns)].to_numpy(dtype=np.float64)[order]
+    cut = np.flatnonzero(codes[1:] != codes[:-1]) + 1
+    starts, ends = np.r_[0, cut], np.r_[cut, len(codes)]
+    sets = [pts[a:b] for a, b in zip(starts, ends)] if len(codes) else []
+    res = _fit_batch(sets, **opts)
+    b = len(sets)
+    out = {by: pd.Series(np.asarray(uniques)[codes[starts]] if b else [],
+                         dtype=df[by].dtype)}
+    flat = np.column_stack([res.offsets.reshape(b, 3), res.matrices.reshape(b, 9),
+                            res.radii, res.rms]) if b else np.zeros((0, 14))
+    for k, name in enumerate(_WIDE[:14]):
+        out[name] = flat[:, k]
+    out["converged"] = np.asarray(res.converged, dtype=bool)
+    out["iterations"] = np.asarray(res.iterations, dtype=np.int64)
+    out["error"] = pd.Series(list(res.errors), dtype=object)
+    return pd.DataFrame(out)
+
+
+def _unique_ids(ids: Any) -> Any:
+    import pandas as pd
+
+    return pd.Series([list(pd.unique(ids))], dtype=object)
+
+
+def _local_rows(df: Any) -> Any:
+    return df.assign(_row=np.arange(len(df), dtype=np.int64))
 
 
 def fit_groups(
@@ -162,6 +172,7 @@ def fit_groups(
     columns: Sequence[str] = ("ax", "ay", "az"),
     *,
     npartitions: int | None = None,
+    shuffle: bool | None = None,
     **options: Any,
 ) -> GroupFit:
     """Fit every device of a dask DataFrame: the rows with the same ``by`` form one set.
@@ -176,6 +187,11 @@ def fit_groups(
         The x, y, z columns (raw units).
     npartitions : int, optional
         Partitions after the shuffle (default: as many as the frame has).
+    shuffle : bool, optional
+        Bring each device's rows into one partition first. ``None`` (default): only when
+        some device's rows are spread over several partitions (checked with one pass over the
+        id column; data written one device per file, or sorted by device, needs none --
+        much faster); ``False``: trust that they are not.
     **options
         As for :func:`triaxcal.fit_batch`.
 
@@ -186,7 +202,6 @@ def fit_groups(
         Each device's readings are fitted in the frame's row order, so the result equals
         ``triaxcal.fit_batch([rows of id in file order for id in sorted ids])`` exactly.
     """
-    import pandas as pd
 
     opts = _fit_kwargs(dict(options))
     if not isinstance(frame, dd.DataFrame):
@@ -202,30 +217,34 @@ def fit_groups(
         raise CalibrationError(
             f"the frame has no column(s) {missing}; it has {list(frame.columns)}")
     sub = frame[[by, *cols]]
-    sub = sub.assign(_row=1)
-    sub = sub.assign(_row=sub["_row"].cumsum())  # the frame's row order, across partitions
-    n = npartitions or frame.npartitions
-    shuffled = sub.shuffle(on=by, npartitions=n)
-    meta = pd.DataFrame({by: pd.Series([], dtype=frame[by].dtype), "offsets": [],
-                         "matrices": [], "radii": pd.Series([], dtype="f8"),
-                         "rms": pd.Series([], dtype="f8"),
-                         "converged": pd.Series([], dtype=bool),
-                         "iterations": pd.Series([], dtype="i8"), "errors": []})
+    if shuffle is None:  # do the partitions hold whole devices already? (one pass over ids)
+        per_part = frame[by].map_partitions(_unique_ids, meta=(by, object)).compute()
+        seen = [i for ids in per_part for i in ids]
+        shuffle = len(seen) != len(set(seen))
+    if shuffle:
+        sub = sub.assign(_row=1)
+        sub = sub.assign(_row=sub["_row"].cumsum())  # the frame's row order, across partitions
+        n = npartitions or frame.npartitions
+        shuffled = sub.shuffle(on=by, npartitions=n)
+    else:
+        shuffled = sub.map_partitions(_local_rows)
+    meta = _fit_partition(shuffled._meta, by, cols, opts)
     fitted = shuffled.map_partitions(_fit_partition, by, cols, opts, meta=meta)
     table = fitted.compute().sort_values(by, kind="stable").reset_index(drop=True)
     b = len(table)
+    wide = table[_WIDE[:14]].to_numpy(dtype=np.float64)
     arrays = {
-        "offsets": np.array(table["offsets"].tolist(), dtype=np.float64).reshape(b, 3),
-        "matrices": np.array(table["matrices"].tolist(), dtype=np.float64).reshape(b, 3, 3),
-        "radii": table["radii"].to_numpy(dtype=np.float64),
-        "rms": table["rms"].to_numpy(dtype=np.float64),
+        "offsets": np.ascontiguousarray(wide[:, 0:3]),
+        "matrices": np.ascontiguousarray(wide[:, 3:12]).reshape(b, 3, 3),
+        "radii": np.ascontiguousarray(wide[:, 12]),
+        "rms": np.ascontiguousarray(wide[:, 13]),
         "converged": table["converged"].to_numpy(dtype=bool),
         "iterations": table["iterations"].to_numpy(dtype=np.int64),
     }
     for a in arrays.values():
         a.setflags(write=False)
     errors = tuple(None if (e is None or (isinstance(e, float) and np.isnan(e))) else str(e)
-                   for e in table["errors"])
+                   for e in table["error"])
     return GroupFit(model=opts.get("model", "full"), errors=errors,
                     ids=tuple(table[by].tolist()), **arrays)
 
