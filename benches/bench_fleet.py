@@ -96,7 +96,8 @@ def main() -> None:
     t = time.perf_counter()
     want = tc.fit_batch(raw, radius=1.0)
     t_in = time.perf_counter() - t
-    layout = "interleaved across files: shuffled" if a.interleaved else "one device per file"
+    layout = ("devices interleaved across files: shuffled" if a.interleaved
+              else "each device in one file: no shuffle")
     print(f"{a.devices} devices x {a.points} points, {a.files} Parquet files ({layout}) in "
           f"{folder}")
     print(f"in-process tc.fit_batch (numpy in memory, rayon): {t_in:.2f} s, "
@@ -106,7 +107,7 @@ def main() -> None:
             n = len(client.scheduler_info()["workers"])
             t = run(client, folder, a.rounds, want)
             print(f"cluster at {a.scheduler} ({n} workers): {t:.2f} s, "
-                  f"{a.devices / t:,.0f} devices/s (read_parquet + shuffle + fit)")
+                  f"{a.devices / t:,.0f} devices/s (read_parquet, shuffle if needed, fit)")
         return
     times = {}
     for workers in (1, 2):
@@ -116,8 +117,8 @@ def main() -> None:
                           ) as cluster, Client(cluster) as client:
             times[workers] = run(client, folder, a.rounds, want)
         print(f"LocalCluster, {workers} worker process(es): {times[workers]:.2f} s, "
-              f"{a.devices / times[workers]:,.0f} devices/s (read_parquet + shuffle + fit), "
-              "identical to in-process")
+              f"{a.devices / times[workers]:,.0f} devices/s (read_parquet, shuffle if needed, "
+              "fit), identical to in-process")
     print(f"2 workers vs 1: {times[1] / times[2]:.2f}x faster")
 
 
