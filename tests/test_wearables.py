@@ -106,3 +106,15 @@ def test_bad_files(tmp_path, files):
     (tmp_path / "cut.bin").write_text(cut, encoding="latin-1")
     with pytest.raises(CalibrationError, match="no complete data page"):
         read_wearable(tmp_path / "cut.bin")
+
+
+def test_without_the_readers_the_error_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    (tmp_path / "a.cwa").write_bytes(b"MD" + bytes(100))
+    (tmp_path / "a.gt3x").write_bytes(b"PK")
+    monkeypatch.setitem(sys.modules, "skdh.io", None)  # import skdh.io now fails
+    monkeypatch.setitem(sys.modules, "pygt3x.reader", None)
+    for name in ("a.cwa", "a.gt3x"):
+        with pytest.raises(CalibrationError, match=r"pip install 'triaxcal\[wearables\]'"):
+            read_wearable(tmp_path / name)
