@@ -203,9 +203,17 @@ class _Display:
                 self.stream.write("\a")
                 self.stream.flush()
 
-    def _lines(self) -> list[str]:
+    def _lines(self, *, full: bool = False) -> list[str]:
         width = max((len(b.label) for b in self.boards), default=0)
-        return [f"{b.label:<{width}}  {b.status}" for b in self.boards]
+        lines = [f"{b.label:<{width}}  {b.status}" for b in self.boards]
+        # a wrapped line would break the redraw: cut at the terminal's width
+        if self.tty and not full:
+            try:
+                cols = os.get_terminal_size(self.stream.fileno()).columns  # type: ignore[union-attr]
+            except (OSError, ValueError, AttributeError):
+                cols = 100
+            lines = [ln[: max(20, cols - 1)] for ln in lines]
+        return lines
 
     def _clear(self) -> None:
         if self.tty and self.drawn and self.stream is not None:
@@ -231,7 +239,7 @@ class _Display:
             return
         with self.lock:
             self._clear()
-            for line in self._lines():
+            for line in self._lines(full=True):
                 self.stream.write(line + "\n")
             self.stream.flush()
 
