@@ -87,9 +87,10 @@ def test_two_boards_one_unplugged_nothing_lost(tmp_path):
     in_flight = unplug_at["before"] - 1 - before[-1]
     assert 0 <= in_flight <= 0.1 * RATE * SPEED  # at most 0.1 s of frames, lost with the port
     assert np.array_equal(after, np.arange(after[0], after[-1] + 1))
-    # the reader discards what arrives in the 20 ms after it re-sends the mode byte (as at the
-    # start of every capture: stale bytes from before the switch)
-    assert 0 <= after[0] - unplug_at["after"] <= 0.03 * RATE * SPEED
+    # the reader discards what arrives while it settles after re-sending the mode byte (20 ms
+    # sleep, then it flushes its input as at the start of every capture; longer on a busy
+    # machine)
+    assert 0 <= after[0] - unplug_at["after"] <= 0.1 * RATE * SPEED
 
 
 def test_boards_without_the_id_command_are_named_by_port(tmp_path, capsys):
