@@ -285,7 +285,7 @@ def test_progress_line_bell_and_suggestion(tmp_path):
                 poses=3, progress=buf, bell=True, handle_sigint=False)
     text = buf.getvalue()
     assert text.count("\a") == 3
-    assert "3/3 poses" in text and "sphere" in text and "next: " in text
+    assert "3/3 poses" in text and "coverage" in text and "next: " in text
 
 
 # ----------------------------------------------------------------------- pulled cable
