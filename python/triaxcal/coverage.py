@@ -197,7 +197,8 @@ class Coverage:
 
     def text(self) -> str:
         """``"coverage 96 % (23 of 24 equal-area cells)"``."""
-        return f"coverage {self.percent:.0f} % ({self.cells_hit} of {self.n_cells} equal-area cells)"
+        return (f"coverage {self.percent:.0f} % ({self.cells_hit} of {self.n_cells} "
+                "equal-area cells)")
 
 
 def coverage(points: Any, *, center: Any = None, n_cells: int = N_CELLS) -> Coverage:

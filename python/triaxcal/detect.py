@@ -76,8 +76,10 @@ _Q25_HALF_NORMAL = 0.31863936396437514
 #: The gyroscope's bias is the median of its means over this many most recent still windows.
 BIAS_WINDOWS = 9
 #: When the gyroscope stays steady for this many windows at a rate that differs from that bias
-#: (it drifted while the board moved), that rate becomes the new bias.
+#: by less than :data:`REANCHOR_MAX` thresholds (it drifted while the board moved), that rate
+#: becomes the new bias; a larger steady rate is a turn at constant speed and stays motion.
 REANCHOR_WINDOWS = 8
+REANCHOR_MAX = 16.0
 
 
 @dataclass(frozen=True)
@@ -344,9 +346,11 @@ class _Segmenter:
                 # the first steady window after motion: is the gyroscope back at its bias?
                 g = means[i, gcols]
                 bias = np.median(np.array(self.gyro_hist), axis=0)
-                if float(np.abs(g - bias).max()) > gyro_thr[i]:  # False for NaN
+                away = float(np.abs(g - bias).max())
+                if away > gyro_thr[i]:  # False for NaN
                     self.rate_fail += 1
-                    if self.rate_fail >= REANCHOR_WINDOWS:  # the bias moved: follow it
+                    if self.rate_fail >= REANCHOR_WINDOWS and away <= REANCHOR_MAX * gyro_thr[i]:
+                        # steady for a while, a little off: the bias moved, follow it
                         self.gyro_hist.clear()
                         self.gyro_hist.append(g)
                         self.rate_fail = 0

@@ -108,3 +108,17 @@ def default_settings() -> PoseSettings:
     p = argparse.ArgumentParser(add_help=False)
     add_pose_options(p)
     return settings_from_args(p.parse_args([]))
+
+
+def stored_settings(stats: Any) -> PoseSettings:
+    """The pose settings a calibration part was fitted with (``stats["pose_detection"]``).
+
+    Parts written before the detector used every sensor stored only ``pose_window`` and
+    ``units_per_g``: they replay with the accelerometer alone, as they were made.
+    """
+    d = stats.get("pose_detection") if hasattr(stats, "get") else None
+    if d is not None:
+        return PoseSettings.from_dict(d)
+    return PoseSettings(window=int(stats.get("pose_window", 25)),
+                        counts_per_g=float(stats.get("units_per_g", 16384.0)),
+                        use_gyro=False, use_mag=False)

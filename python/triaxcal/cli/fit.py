@@ -5,7 +5,8 @@ Input: a session CSV from ``triaxcal capture`` (header ``t,ax,ay,az,...``) or an
 numbers -- comma, semicolon, tab or space separated, with or without a header row (detected).
 ``--columns`` picks three columns by name or zero-based index (``ax,ay,az`` or ``0,1,2``);
 by default the sensor's named columns, or the first three of a headerless file. ``--poses``
-first reduces a raw time series to still-pose means (:func:`triaxcal.detect.detect_poses`).
+first reduces a raw time series to still-pose means, a pose ending when any sensor says the
+board moved, exactly as ``triaxcal capture`` counted them (:func:`triaxcal.poses.session_poses`).
 Outliers are rejected by the iterated 2-sigma rule on vector lengths (``--sigma 0`` disables).
 """
 
@@ -22,8 +23,11 @@ from typing import Any
 import numpy as np
 
 from ..calibration import SENSORS, Calibration, SensorCalibration
+from ..coverage import coverage, coverage_warning
 from ..errors import CalibrationError
 from ..fit import MODELS
+from ..poses import PoseSettings, sensor_columns, session_poses
+from ._poses import add_pose_options, settings_from_args
 
 #: Default column names per sensor (the device channel order,
 #: :data:`triaxcal.io.protocol.CHANNELS_10`).
@@ -223,9 +227,7 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "(exactly Magneto's rule)")
     p.add_argument("--poses", action="store_true",
                    help="reduce a raw time series (a capture session) to still-pose means first")
-    p.add_argument("--window", type=int, default=25, help="pose detection window (samples)")
-    p.add_argument("--units-per-g", type=float, default=16384.0,
-                   help="accelerometer counts per g, for --poses (16384 at +-2 g)")
+    add_pose_options(p)
 
 
 @dataclass
@@ -240,19 +242,24 @@ class FitOutcome:
     table: Table
 
 
-def _pose_points(table: Table, cols: list[int], args: argparse.Namespace) -> np.ndarray:
-    from ..detect import detect_poses
-
-    names = table.names or ()
-    acc = [names.index(c) for c in SENSOR_COLUMNS["accel"]] if all(
-        c in names for c in SENSOR_COLUMNS["accel"]) else cols
-    det = detect_poses(table.data, window=args.window, units_per_g=args.units_per_g, columns=acc)
+def pose_points(
+    table: Table, cols: list[int], settings: PoseSettings
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Still-pose means of columns ``cols``, and the statistics that say how they were found
+    (``poses``, ``n_poses``, ``pose_detection``: the settings with the values the data
+    decided, so that ``report`` finds the same poses again)."""
+    accel = None if "accel" in sensor_columns(table.names) else cols
+    det, how = session_poses(table.names, table.data, settings, accel=accel)
     if len(det.poses) == 0:
         raise CalibrationError(
-            f"no still poses found in {table.path} (window {args.window} samples): hold the "
+            f"no still poses found in {table.path} (window {settings.window} samples): hold the "
             "board still for a second in each pose, or drop --poses for point-per-row data"
         )
-    return np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
+    pts = np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
+    stats = {"poses": True, "n_poses": len(det.poses),
+             "pose_detection": settings.with_resolved(how).to_dict(),
+             "pose_sensors": list(how.sensors)}
+    return pts, stats
 
 
 def fit_file(args: argparse.Namespace) -> FitOutcome:
@@ -262,7 +269,11 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     sensor = args.sensor or "accel"
     table = read_table(args.data)
     cols = pick_columns(table, args.columns, sensor)
-    pts = _pose_points(table, cols, args) if args.poses else table.data[:, cols]
+    pose_stats: dict[str, Any] = {}
+    if args.poses:
+        pts, pose_stats = pose_points(table, cols, settings_from_args(args))
+    else:
+        pts = table.data[:, cols]
     if args.radius is not None:
         radius, unit = parse_radius(args.radius, sensor)
     elif DEFAULT_RADIUS[sensor] is not None:
@@ -282,20 +293,20 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         "sigma": float(args.sigma),
         "rejection_rounds": int(rob.rounds),
     }
-    if args.poses:
-        extra["pose_window"] = int(args.window)
-        extra["units_per_g"] = float(args.units_per_g)
+    extra.update(pose_stats)
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
-    from ..report import coverage
-
     part = SensorCalibration.from_fit(
         rob.fit, raw_unit=args.raw_unit, unit=unit, points=pts[rob.inliers],
         rejected=rob.rejected, input_sha256=table.sha256, source=str(table.path),
         extra_stats=extra,
     )
     stats = dict(part.stats)
-    stats["coverage_pct"] = coverage(part.apply(pts[rob.inliers]))[1]
+    cov = coverage(part.apply(pts))  # of the session: every reading, outliers too
+    stats["coverage_pct"] = cov.percent
+    low = coverage_warning(cov, sensor)
+    if low:
+        stats["warnings"] = [*stats.get("warnings", []), low]
     part = SensorCalibration(**{**_fields(part), "stats": stats})
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
                       reason=rob.model_reason, table=table)

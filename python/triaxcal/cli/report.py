@@ -17,7 +17,8 @@ from typing import Any
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..report import QualityReport, plot_report, quality_report
-from .fit import add_fit_options, fit_file, pick_columns, read_table
+from ._poses import stored_settings
+from .fit import add_fit_options, fit_file, pick_columns, pose_points, read_table
 
 
 def register(subparsers: Any) -> None:
@@ -111,12 +112,8 @@ def run(args: argparse.Namespace) -> int:
             cols = pick_columns(table, cols_spec or None, sensor)
             pts = table.data[:, cols]
             if part.stats.get("poses"):
-                from .fit import _pose_points
-
-                same = argparse.Namespace(**vars(args))
-                same.window = int(part.stats.get("pose_window", args.window))
-                same.units_per_g = float(part.stats.get("units_per_g", args.units_per_g))
-                pts = _pose_points(table, cols, same)
+                # the poses the part was fitted on, found again with its stored settings
+                pts, _ = pose_points(table, cols, stored_settings(part.stats))
             rej = part.stats.get("rejected") if table.sha256 == part.input_sha256 else None
             if rej is not None and (not rej or max(rej) < len(pts)):
                 rep = quality_report(pts, part, sensor=sensor, rejected=rej)

@@ -17,7 +17,6 @@ way to turn the board next.
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import signal
 import sys
