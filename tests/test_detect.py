@@ -254,7 +254,7 @@ def test_given_thresholds_are_used_as_given():
 def test_constant_rate_turn_about_the_vertical_is_motion():
     # a turntable about the vertical at 10 deg/s for 10 s: the accelerometer sees nothing, the
     # change of the gyro's window mean is zero; only its rate away from the bias shows it
-    rate, bias, n = 100, np.array([60.0, -40.0, 25.0]), 3000
+    bias, n = np.array([60.0, -40.0, 25.0]), 3000  # 100 samples/s
     rng = np.random.default_rng(0)
     acc = np.tile([0.0, 0.0, 16384.0], (n, 1)) + rng.normal(0, 30, (n, 3))
     gyro = bias + rng.normal(0, 4, (n, 3))
