@@ -83,11 +83,12 @@ def _cause(axis: str, cw: float, ccw: float, peaks: dict[str, float], angle: flo
     if sat:
         return (f"the {' and '.join(sat)} turn saturated the gyro (|raw| reached "
                 f"{max(peaks.values()):.0f}): turn more slowly or choose a larger range")
-    bigger = "counter-clockwise" if ccw > cw else "clockwise"
-    return (f"the turns were probably not the same angle both ways (the {bigger} one went "
-            f"further, or the other stopped short of {angle:g} deg): turn against a fixed stop, "
-            "e.g. from one face of a cube to the next on a flat table; a bias that drifted "
-            "between the turns does this too (hold still longer, or fit the temperature drift)")
+    mean = 0.5 * (cw + ccw)
+    return (f"the turns were probably not the same angle both ways (at the mean gain the "
+            f"clockwise ones measure {angle * cw / mean:.1f} deg, the counter-clockwise ones "
+            f"{angle * ccw / mean:.1f}): turn against a fixed stop, e.g. from one face of a cube "
+            "to the next on a flat table; a bias that drifted between the turns does this too "
+            "(hold still longer, or fit the temperature drift)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -17,6 +17,8 @@ from typing import Any
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..report import QualityReport, plot_report, quality_report
+from ._calfile import file_sha256
+from ._method_parts import summary_only, summary_text, tilt_points
 from ._poses import stored_settings
 from .fit import add_fit_options, fit_file, pick_columns, pose_points, read_table
 
@@ -102,19 +104,27 @@ def run(args: argparse.Namespace) -> int:
                     print(f"  (no figure for {sensor}: its data file {part.source!r} was not "
                           "found; pass --data FILE)", file=sys.stderr)
                 continue
-            table = read_table(src)
-            if args.data_file is None and part.input_sha256 not in (None, table.sha256):
+            if summary_only(part):  # gyro gains, temperature terms, a bias: not a sphere
+                print(summary_text(sensor, part))
+                continue
+            if part.stats.get("method") == "tilt-rig":
+                pts, sha = tilt_points(src, part), file_sha256(src)
+            else:
+                table = read_table(src)
+                sha = table.sha256
+                cols_spec = args.columns or ",".join(
+                    str(c) for c in part.stats.get("columns", []))
+                cols = pick_columns(table, cols_spec or None, sensor)
+                pts = table.data[:, cols]
+                if part.stats.get("poses"):
+                    # the poses the part was fitted on, found again with its stored settings
+                    pts, _ = pose_points(table, cols, stored_settings(part.stats))
+            if args.data_file is None and part.input_sha256 not in (None, sha):
                 raise CalibrationError(
                     f"{src} has changed since the calibration was made (SHA-256 differs): pass "
                     "--data FILE explicitly to judge the calibration on it anyway"
                 )
-            cols_spec = args.columns or ",".join(str(c) for c in part.stats.get("columns", []))
-            cols = pick_columns(table, cols_spec or None, sensor)
-            pts = table.data[:, cols]
-            if part.stats.get("poses"):
-                # the poses the part was fitted on, found again with its stored settings
-                pts, _ = pose_points(table, cols, stored_settings(part.stats))
-            rej = part.stats.get("rejected") if table.sha256 == part.input_sha256 else None
+            rej = part.stats.get("rejected") if sha == part.input_sha256 else None
             if rej is not None and (not rej or max(rej) < len(pts)):
                 rep = quality_report(pts, part, sensor=sensor, rejected=rej)
             else:

@@ -6,7 +6,8 @@ accelerometer) around the unknown offset. ``descent`` is its variable-step 26-ne
 search: from ``--start`` (0,0,0), move to the neighbour one ``--step`` (1000) away that lowers
 the error sum  sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|, else divide the step by ``--shrink``
 (10), down to ``--min-step`` (0.01). ``grid`` is its brute-force cube search, around the mean
-of the readings, ``--half-width`` wide at ``--step``. ``fit`` solves least squares of
+of the readings, ``--half-width`` wide at ``--step``, repeated around the best node 20 times
+finer down to ``--min-step`` (``--no-refine``: one pass). ``fit`` solves least squares of
 |p - c| - R for the centre alone (Gauss-Newton). Because R is known, a part of the sphere (a
 "wedge") is enough.
 
@@ -53,13 +54,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="descent: first step (default 1000); grid: node spacing (default "
                         "half-width / 20)")
     p.add_argument("--min-step", type=float, default=0.01, metavar="S",
-                   help="descent: stop when the step falls below this (default 0.01)")
+                   help="descent, grid: stop when the step falls below this (default 0.01)")
     p.add_argument("--shrink", type=float, default=10.0, metavar="F",
                    help="descent: divide the step by F when no neighbour is better (default 10)")
     p.add_argument("--start", default="0,0,0", metavar="X,Y,Z",
                    help="descent: start point, raw units (default 0,0,0, the seed's)")
     p.add_argument("--half-width", type=float, default=None, metavar="W",
                    help="grid: search the cube mean +- W (default R / 10)")
+    p.add_argument("--no-refine", action="store_true",
+                   help="grid: one pass at --step; by default the search is repeated around "
+                        "the best node, 20 times finer, down to --min-step")
     p.add_argument("--sensor", choices=("accel", "gyro", "mag"), default="accel",
                    help="which sensor the readings are from (default accel)")
     p.add_argument("--columns", default=None,
@@ -133,11 +137,22 @@ def centre(pts: np.ndarray, r: float, args: Any) -> tuple[np.ndarray, dict[str, 
         if not (math.isfinite(hw) and hw > 0):
             raise CalibrationError(f"--half-width must be > 0, got {args.half_width}")
         step = hw / 20.0 if args.step is None else float(args.step)
+        min_step = float(args.min_step)
+        if not (math.isfinite(step) and step > 0 and math.isfinite(min_step) and min_step > 0):
+            raise CalibrationError("--step and --min-step must be > 0")
         mid = pts.mean(axis=0)
-        d = grid_center(pts, r, lo=mid - hw, hi=mid + hw, step=step)
-        return np.asarray(d.center), {"iterations": d.iterations, "evaluations": d.evaluations,
-                                      "step": step, "half_width": hw,
-                                      "grid_center": mid.tolist()}
+        c, half = mid, hw
+        evaluations = passes = 0
+        while True:  # the cube search, then again around its best node, 20 times finer
+            d = grid_center(pts, r, lo=c - half, hi=c + half, step=step)
+            c = np.asarray(d.center)
+            evaluations += d.evaluations
+            passes += 1
+            if args.no_refine or step <= min_step:
+                break
+            half, step = step, max(step / 20.0, min_step)
+        return c, {"iterations": passes, "evaluations": evaluations, "step": step,
+                   "half_width": hw, "grid_center": mid.tolist()}
     try:
         f = fit_sphere(pts, radius=r, scale="fixed")  # type: ignore[call-arg]
     except TypeError:  # a triaxcal without the fixed-scale sphere fit
@@ -182,8 +197,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.sensor} centre by {args.method} (R = {r:g} {u}, {len(pts)} readings): "
           f"{c[0]:.2f} {c[1]:.2f} {c[2]:.2f} {u}", file=out)
     print(f"  error sum {err:.6g} {u}^2, RMS of |p - c| - R {rms:.4g} {u}"
-          + (f", {info['iterations']} steps, {info['evaluations']} error sums"
-             if "evaluations" in info else ""), file=out)
+          + (f", {info['iterations']} {'passes' if args.method == 'grid' else 'steps'}, "
+             f"{info['evaluations']} error sums" if "evaluations" in info else ""), file=out)
     print(f"  (the plain mean of the readings would say {mean[0]:.2f} {mean[1]:.2f} "
           f"{mean[2]:.2f} {u})", file=out)
     what = (f"offset, {scale[0]:g} {scale[1]} = {r:g} {u}" if scale is not None

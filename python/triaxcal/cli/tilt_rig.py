@@ -125,6 +125,8 @@ def read_tilts(path: str | Path) -> tuple[tuple[str, ...] | None, dict[str, np.n
             f"{p}: no readings for {', '.join(missing)} (label them FD, AD, LD, RD: fore down, "
             "aft down, left down, right down)"
         )
+    if names is not None and width is not None and len(names) == width + 1:
+        names = names[1:]  # the header names the label column too
     if names is not None and width is not None and len(names) != width:
         raise CalibrationError(f"{p}: the header names {len(names)} columns, the rows have {width}")
     return names, {k: np.array(v) for k, v in groups.items()}
@@ -188,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
               f"{alt.gain[0]:.6g}  y {alt.gain[1]:.6g}  z {alt.gain[2]:.6g} g per {u}. Measure "
               f"the rig's angle (or pass --angle {mean_imp:.2f} if the gains are known to be "
               "equal)", file=out)
-    part = part_from_tilt_rig(rig, raw_unit=u, stats={"n": n, **extra},
+    part = part_from_tilt_rig(rig, raw_unit=u, stats={"n": n, "columns": cols, **extra},
                               source=str(args.data), input_sha256=file_sha256(args.data))
     everything = np.vstack(list(readings.values()))
     norms = np.linalg.norm(part.apply(everything), axis=1)
