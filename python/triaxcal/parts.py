@@ -34,6 +34,7 @@ from .calibration import SensorCalibration, TemperatureTerms
 from .errors import CalibrationError
 
 __all__ = [
+    "fold_asa",
     "part_from_center",
     "part_from_gyro_gains",
     "part_from_temperature",
@@ -264,3 +265,37 @@ def _fields(part: SensorCalibration) -> dict[str, Any]:
     return {k: getattr(part, k) for k in ("offset", "matrix", "raw_unit", "unit", "radius",
                                           "model", "temperature", "stats", "input_sha256",
                                           "source")}
+
+
+def fold_asa(part: SensorCalibration, asa: Any) -> SensorCalibration:
+    """A magnetometer part fitted on ASA-adjusted readings, rewritten for the register counts.
+
+    With ``k`` the factors of :func:`triaxcal.io.akm.asa_factors`, the adjusted reading is
+    ``k * raw``, so ``(k * raw - o) @ M.T = (raw - o / k) @ (M @ diag(k)).T``: the part's offset
+    becomes ``o / k`` and its matrix ``M @ diag(k)``; ``stats["asa"]`` records the bytes.
+    Temperature terms (in adjusted counts) are divided by ``k`` too.
+
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> adjusted = tc.SensorCalibration(offset=[50.0, 0, 0], matrix=np.eye(3) * 0.15, unit="uT")
+    >>> raw = fold_asa(adjusted, [192, 128, 128])          # k = 1.25, 1, 1
+    >>> raw.apply([[40.0 * 1.0, 0, 0]]).round(9).tolist()   # 40 counts read 50 adjusted: 0 uT
+    [[0.0, 0.0, 0.0]]
+    """
+    from .io.akm import asa_factors
+
+    k = asa_factors(asa)
+    if part.stats.get("asa") is not None:
+        raise CalibrationError("this part already holds an ASA adjustment")
+    terms = part.temperature
+    if terms is not None:
+        if terms.gain_poly is not None:
+            raise CalibrationError("cannot fold ASA into temperature gain terms")
+        terms = TemperatureTerms(temp_ref_c=terms.temp_ref_c, temp_range_c=terms.temp_range_c,
+                                 offset_poly=np.asarray(terms.offset_poly) / k)
+    stats = {**part.stats, "asa": [int(v) for v in np.round((k - 1.0) * 256.0 + 128.0)],
+             "asa_factors": [float(v) for v in k]}
+    return SensorCalibration(**{**_fields(part), "offset": part.offset / k,
+                                "matrix": part.matrix @ np.diag(k), "temperature": terms,
+                                "stats": stats})

@@ -26,6 +26,8 @@ from ..calibration import SENSORS, Calibration, SensorCalibration
 from ..coverage import coverage, coverage_warning
 from ..errors import CalibrationError
 from ..fit import MODELS
+from ..io.akm import apply_asa, asa_factors
+from ..parts import fold_asa
 from ..poses import PoseSettings, sensor_columns, session_poses
 from ._poses import add_pose_options, settings_from_args
 
@@ -201,6 +203,19 @@ def pick_columns(table: Table, spec: str | None, sensor: str) -> list[int]:
 # The fit pipeline, shared with `triaxcal report`
 
 
+def _asa(text: str) -> tuple[int, int, int]:
+    parts = [s.strip() for s in text.split(",")]
+    try:
+        vals = tuple(int(s, 0) for s in parts)
+        asa_factors(vals)
+    except (ValueError, CalibrationError):
+        raise argparse.ArgumentTypeError(
+            f"--asa {text!r}: give the three fuse-ROM bytes, e.g. 176,177,165 (0..255, "
+            "decimal or 0x..)"
+        ) from None
+    return vals  # type: ignore[return-value]
+
+
 def add_fit_options(p: argparse.ArgumentParser) -> None:
     """The options of ``fit`` that ``report`` also takes for a session file."""
     p.add_argument("--sensor", choices=SENSORS, default=None,
@@ -227,6 +242,10 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "(exactly Magneto's rule)")
     p.add_argument("--poses", action="store_true",
                    help="reduce a raw time series (a capture session) to still-pose means first")
+    p.add_argument("--asa", type=_asa, default=None, metavar="X,Y,Z",
+                   help="magnetometer: the fuse-ROM sensitivity bytes ASAX,ASAY,ASAZ of an "
+                        "AK8963 (AK8975, AK09911, AK09912), applied before fitting as "
+                        "k = (ASA - 128) / 256 + 1; the part still takes the register counts")
     add_pose_options(p)
 
 
@@ -284,7 +303,13 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         unit = args.unit
     if args.rounds < 0:
         raise CalibrationError("--rounds must be >= 0")
-    rob = fit_robust(pts, model=args.model, radius=radius, sigma=args.sigma,
+    fitted = pts
+    if getattr(args, "asa", None) is not None:
+        if sensor != "mag":
+            raise CalibrationError("--asa is the magnetometer's sensitivity adjustment: use it "
+                                   "with --sensor mag")
+        fitted = apply_asa(pts, args.asa)  # adjusted before fitting, folded back below
+    rob = fit_robust(fitted, model=args.model, radius=radius, sigma=args.sigma,
                      max_rounds=args.rounds, lengths=args.reject_on)
     extra: dict[str, Any] = {
         "columns": [table.names[c] if table.names else c for c in cols],
@@ -297,10 +322,12 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
     part = SensorCalibration.from_fit(
-        rob.fit, raw_unit=args.raw_unit, unit=unit, points=pts[rob.inliers],
+        rob.fit, raw_unit=args.raw_unit, unit=unit, points=fitted[rob.inliers],
         rejected=rob.rejected, input_sha256=table.sha256, source=str(table.path),
         extra_stats=extra,
     )
+    if fitted is not pts:  # the part takes the register counts the chip reports
+        part = fold_asa(part, args.asa)
     stats = dict(part.stats)
     cov = coverage(part.apply(pts))  # of the session: every reading, outliers too
     stats["coverage_pct"] = cov.percent

@@ -9,6 +9,8 @@ One module per target format:
   (Q7.24 matrix, int64 accumulation), and :func:`apply_fixed`, its bit-exact Python model.
 * :mod:`~triaxcal.export.motioncal` -- :func:`motioncal_packet`, the 68-byte PJRC MotionCal
   packet that Adafruit_Sensor_Calibration sketches accept.
+* :mod:`~triaxcal.export.js` -- :func:`js_module`, a JavaScript module with the coefficients and
+  ``apply``: an ES module (``js``) or plain ECMAScript 5.1 for Espruino (``js-espruino``).
 * :func:`write_outputs` -- everything for a calibration into one folder (``triaxcal demo``).
 
 Error model of every export: ``calibrated = matrix @ (raw - offset)`` (the matrix
@@ -35,6 +37,7 @@ from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ._cgen import _ident
 from .c import c_header
 from .c_fixed import FixedPoint, apply_fixed, c_fixed_header, fixed_point
+from .js import js_module
 from .motioncal import motioncal_packet
 
 __all__ = [
@@ -51,13 +54,14 @@ __all__ = [
     "encode_motioncal",
     "export",
     "fixed_point",
+    "js_module",
     "motioncal_packet",
     "parse_motioncal_echo",
     "unit_factor",
     "write_outputs",
 ]
 
-EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal")
+EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal", "js", "js-espruino")
 
 
 def export(
@@ -78,6 +82,9 @@ def export(
         p.write_text(cal.to_json(), encoding="utf-8")
     elif fmt == "motioncal":
         p.write_bytes(motioncal_packet(cal, counts_per_unit=counts_per_unit))
+    elif fmt in ("js", "js-espruino"):
+        form = "esm" if fmt == "js" else "espruino"
+        p.write_text(js_module(cal, prefix=prefix, form=form), encoding="utf-8")
     else:
         raise CalibrationError(f"unknown export format {fmt!r}: use one of {EXPORT_FORMATS}")
     return p
