@@ -19,12 +19,16 @@ from .detect import (
 )
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .export import (
+    adafruit_calib_json,
+    ardupilot_parm,
     c_fixed_header,
     c_header,
     decode_motioncal,
     encode_motioncal,
     js_module,
+    kalibr_imu_yaml,
     motioncal_packet,
+    px4_params_file,
     write_outputs,
 )
 from .fit import (
@@ -41,6 +45,8 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .io.logs import read_log
+from .io.recording import LogRecording, Stream
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -86,6 +92,13 @@ __all__ = [
     "part_from_temperature",
     "part_from_tilt_rig",
     "js_module",
+    "LogRecording",
+    "Stream",
+    "adafruit_calib_json",
+    "ardupilot_parm",
+    "kalibr_imu_yaml",
+    "px4_params_file",
+    "read_log",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",

@@ -122,3 +122,17 @@ def stored_settings(stats: Any) -> PoseSettings:
     return PoseSettings(window=int(stats.get("pose_window", 25)),
                         counts_per_g=float(stats.get("units_per_g", 16384.0)),
                         use_gyro=False, use_mag=False)
+
+
+def apply_settings(args: Any, settings: PoseSettings) -> None:
+    """Set the pose options of ``args`` (an argparse namespace) to ``settings``: the inverse of
+    :func:`settings_from_args`."""
+    args.window = settings.window
+    args.accel_threshold = settings.accel_threshold_g
+    args.counts_per_g = settings.counts_per_g
+    args.gyro_threshold = ("off" if not settings.use_gyro else
+                           "auto" if settings.gyro_threshold is None else settings.gyro_threshold)
+    args.mag_threshold = ("off" if not settings.use_mag else
+                          "auto" if settings.mag_threshold is None else settings.mag_threshold)
+    args.holdoff = settings.holdoff_s
+    args.rate_hz = settings.rate_hz
