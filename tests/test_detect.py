@@ -89,8 +89,11 @@ def test_online_equals_offline_for_any_chunking(seed, cuts, max_windows, min_win
     for a, b in zip(bounds[:-1], bounds[1:]):
         got += on.update(x[a:b])
     got += on.finish()
-    assert [(p.start, p.end) for p in got] == [(p.start, p.end) for p in off.poses]
-    np.testing.assert_allclose([p.mean for p in got], [p.mean for p in off.poses], rtol=1e-12,
+    # registered at the same moments; and (with max_windows, once the run ended) the same means
+    assert [p.start for p in got] == [p.start for p in off.poses]
+    final = on.poses
+    assert [(p.start, p.end) for p in final] == [(p.start, p.end) for p in off.poses]
+    np.testing.assert_allclose([p.mean for p in final], [p.mean for p in off.poses], rtol=1e-12,
                                atol=1e-12)
     assert [(r.start, r.end, r.reason) for r in on.rejected] == [
         (r.start, r.end, r.reason) for r in off.rejected
@@ -103,14 +106,34 @@ def test_online_max_windows_registers_early_like_the_seed_beep():
     first_seen = {}
     for i in range(0, len(x), 10):
         for p in on.update(x[i:i + 10]):
-            first_seen[p.start] = i + 10
+            first_seen[p.start] = (i + 10, p)
+    on.finish()
     off = tc.detect_poses(x, max_windows=4)
     assert sorted(first_seen) == [p.start for p in off.poses]
-    assert all(p.n == 3 * 25 for p in off.poses)  # three steady windows after the opener
-    # registered (the beep) long before the sensor moves again
+    # registered (the beep) after three steady windows, long before the sensor moves again...
     for p in off.poses:
-        assert first_seen[p.start] <= p.end + 10
+        seen, early = first_seen[p.start]
+        assert early.n == 3 * 25 and seen <= p.start + 3 * 25 + 10 < p.end
+    # ... and then averaged until it moves: the whole run, as without max_windows
+    whole = tc.detect_poses(x)
+    assert [(p.start, p.end, p.n) for p in off.poses] == [
+        (p.start, p.end, p.n) for p in whole.poses]
+    assert [(p.start, p.end) for p in on.poses] == [(p.start, p.end) for p in off.poses]
     np.testing.assert_allclose(off.points, truth, atol=0.01)
+
+
+def test_early_decisions_make_capture_and_fit_agree():
+    # the seed's rule alone: the twists at the poles merge into runs whose first second and
+    # whole mean differ; deciding on the first 4 windows in both places gives one answer
+    _, _, x = _globe(seed=3)
+    on = tc.PoseDetector(units_per_g=16384, max_windows=4)
+    for i in range(0, len(x), 97):
+        on.update(x[i:i + 97])
+    on.finish()
+    off = tc.detect_poses(x, units_per_g=16384, max_windows=4)
+    assert [p.start for p in on.poses] == [p.start for p in off.poses]
+    late = tc.detect_poses(x, units_per_g=16384)  # decided on whole runs: another answer here
+    assert len(late.poses) != len(off.poses)
 
 
 def test_bad_input_is_rejected():
@@ -332,8 +355,10 @@ def test_every_sensor_online_equals_offline_for_any_chunking(cuts, max_windows, 
     for a, b in zip(bounds[:-1], bounds[1:]):
         got += on.update(x[a:b])
     got += on.finish()
-    assert [(p.start, p.end) for p in got] == [(p.start, p.end) for p in off.poses]
-    np.testing.assert_allclose([p.mean for p in got], [p.mean for p in off.poses], rtol=1e-9)
+    assert [p.start for p in got] == [p.start for p in off.poses]
+    final = on.poses
+    assert [(p.start, p.end) for p in final] == [(p.start, p.end) for p in off.poses]
+    np.testing.assert_allclose([p.mean for p in final], [p.mean for p in off.poses], rtol=1e-9)
     assert on.thresholds == off.thresholds
 
 

@@ -122,7 +122,8 @@ def test_command_line_options_map_to_settings():
 
 def test_parts_written_before_store_only_window_and_units():
     old = stored_settings({"poses": True, "pose_window": 30, "units_per_g": 8192.0})
-    assert old == PoseSettings(window=30, counts_per_g=8192.0, use_gyro=False, use_mag=False)
+    assert old == PoseSettings(window=30, counts_per_g=8192.0, use_gyro=False, use_mag=False,
+                               hold_windows=None)
     new = PoseSettings(holdoff_s=1.0).to_dict()
     assert stored_settings({"pose_detection": new}) == PoseSettings(holdoff_s=1.0)
 

@@ -240,7 +240,8 @@ class _Segmenter:
         self.run_len = 0
         self.run_s1: Any = 0.0
         self.run_s2: Any = 0.0
-        self.run_done = False  # registered early (max_windows); ignore until motion
+        self.run_done = False  # decided early (max_windows); averaged on until motion
+        self.run_pose: int | None = None  # index of the pose the open run registered early
         self.points: list[np.ndarray] = []
         self._pts = np.empty((64, 3))  # the same points as an array, for distance checks
         self._mag_pts = np.empty((64, 3))  # magnetometer means of the poses
@@ -360,7 +361,8 @@ class _Segmenter:
             self.rate_fail = 0
             # steady windows i..j-1 extend the open run (opened by the window before i)
             if self.run_done:
-                self.run_len += j - i
+                # decided early (max_windows): a registered pose keeps averaging until motion
+                self._extend(cs1[j] - cs1[i], cs2[j] - cs2[i], j - i)
             elif self.max_windows is not None and self.run_len + (j - i) >= self.max_windows:
                 take = self.max_windows - self.run_len
                 self._extend(cs1[i + take] - cs1[i], cs2[i + take] - cs2[i], take)
@@ -370,7 +372,7 @@ class _Segmenter:
                 if self.skip_until > k + take - 1:
                     i += take
                     continue
-                self.run_len += (j - i) - take
+                self._extend(cs1[j] - cs1[i + take], cs2[j] - cs2[i + take], (j - i) - take)
             else:
                 self._extend(cs1[j] - cs1[i], cs2[j] - cs2[i], j - i)
             if gcols is not None:
@@ -381,6 +383,8 @@ class _Segmenter:
     def _open(self, win: int) -> None:
         # the opening window (the last one that differed from its predecessor) may still hold
         # the end of the motion: it counts towards min_windows but not towards the mean
+        if self.run_pose is not None:
+            self._finish_early()
         self.run_first = win
         self.run_len = 1
         self.run_s1 = 0.0
@@ -392,10 +396,38 @@ class _Segmenter:
         self.run_s2 = self.run_s2 + s2
         self.run_len += k
 
+    def _stats(self) -> tuple[int, int, int, np.ndarray, np.ndarray]:
+        """start, end, n, mean and std of the open run (without its opening window)."""
+        w = self.window
+        start = (self.run_first + 1) * w
+        end = (self.run_first + self.run_len) * w
+        n = end - start
+        m = self.run_s1 / n
+        std = np.sqrt(np.maximum(self.run_s2 / n - m * m, 0.0))
+        assert self.ref is not None
+        return start, end, n, m + self.ref, std
+
+    def _finish_early(self) -> None:
+        """The run of a pose registered early ended: its mean covers the whole run now."""
+        idx = self.run_pose
+        self.run_pose = None
+        if idx is None:
+            return
+        start, end, n, mean, std = self._stats()
+        mean.setflags(write=False)
+        std.setflags(write=False)
+        self.poses[idx] = Pose(start=start, end=end, mean=mean, n=n, std=std)
+        point = mean[list(self.columns)]
+        self.points[idx] = point
+        self._pts[idx] = point
+        if self.mag is not None:
+            self._mag_pts[idx] = mean[self.mag.columns]
+
     def _close(self, at: int, keep_open: bool = False) -> list[Pose]:
         """Decide on the open run at window ``at``; register it or record why not."""
         out: list[Pose] = []
         if self.run_done:
+            self._finish_early()
             self.run_len = 0
             self.run_done = False
             return out
@@ -442,7 +474,10 @@ class _Segmenter:
                         self._mag_pts[m] = mean[self.mag.columns]
                     self.poses.append(pose)
                     out.append(pose)
+                    if keep_open:
+                        self.run_pose = m
                     if self.holdoff_windows:
+                        self.run_pose = None  # the hold-off ends the run here
                         self.skip_until = at + 1 + self.holdoff_windows
                         self.fresh = True
                         self.run_len = 0
@@ -619,9 +654,11 @@ def detect_poses(
         Largest standard deviation of any accelerometer axis about the run's mean (noise
         plus slow drift); noisier runs are rejected as "too noisy". ``None``: ``threshold``.
     max_windows : int, optional
-        Register a run as soon as it has this many windows (the seed's beep; the rest of the
-        run is ignored until the board moves). ``None``: register when the motion resumes,
-        averaging the whole run.
+        Decide on a run as soon as it has this many windows (the seed's beep: the pose is
+        registered, or rejected, on those windows' mean, and :meth:`PoseDetector.update` returns
+        it then); a registered pose goes on averaging until the board moves, and
+        :attr:`PoseDetection.poses` hold the whole run's mean. ``None``: decide when the motion
+        resumes, on the whole run.
     columns : sequence of 3 ints
         The accelerometer's channels, for detection and for :attr:`PoseDetection.points`.
     gyro_columns : sequence of 3 ints, optional
@@ -774,7 +811,8 @@ class PoseDetector:
 
     @property
     def poses(self) -> list[Pose]:
-        """All poses registered so far."""
+        """All poses registered so far (with ``max_windows``, a pose's mean grows to its whole
+        run once the board moves)."""
         return list(self._seg.poses)
 
     @property

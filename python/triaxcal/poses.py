@@ -107,6 +107,10 @@ class PoseSettings:
         them).
     gyro_threshold, mag_threshold : float, optional
         In the sensor's raw units (counts). ``None``: learnt from the sensor's noise.
+    hold_windows : int, optional
+        A run is registered (or rejected) once it has this many windows -- the capture's bell,
+        the seed's beep -- and then goes on averaging until the board moves. ``None``: decided
+        when the board moves. The same in capture and fit, so both make the same decisions.
     holdoff_s : float
         Seconds ignored after each registered pose (the seed's 2 s after its beep); 0: none.
     rate_hz : float, optional
@@ -121,6 +125,7 @@ class PoseSettings:
     use_mag: bool = True
     gyro_threshold: float | None = None
     mag_threshold: float | None = None
+    hold_windows: int | None = 4
     holdoff_s: float = 0.0
     rate_hz: float | None = None
 
@@ -134,6 +139,11 @@ class PoseSettings:
         _positive(self.gyro_threshold, "gyro_threshold (gyro counts)")
         _positive(self.mag_threshold, "mag_threshold (magnetometer counts)")
         _positive(self.rate_hz, "rate_hz")
+        hw = self.hold_windows
+        if hw is not None and (isinstance(hw, bool) or not isinstance(hw, (int, np.integer))
+                               or hw < 2):
+            raise CalibrationError(f"hold_windows must be a whole number >= 2 (or None), got "
+                                   f"{hw!r}")
         h = self.holdoff_s
         if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) or \
                 not (math.isfinite(float(h)) and float(h) >= 0):
@@ -229,6 +239,7 @@ class PoseSettings:
             "units_per_g": cpg,
             "columns": cols["accel"],
             "holdoff_samples": holdoff,
+            "max_windows": None if self.hold_windows is None else int(self.hold_windows),
         }
         if "gyro" in cols:
             kwargs["gyro_columns"] = cols["gyro"]

@@ -50,6 +50,20 @@ def _threshold(text: str) -> float | str:
     return _positive_float(text)
 
 
+def _hold(text: str) -> int | None:
+    if text.strip().lower() == "off":
+        return None
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a whole number or 'off', got {text!r}") from None
+    if v < 2:
+        raise argparse.ArgumentTypeError(
+            f"expected a number >= 2 (two windows to compare), got {v}")
+    return v
+
+
 def add_pose_options(p: argparse.ArgumentParser) -> None:
     """Add the pose-detection group to a command's parser."""
     g = p.add_argument_group(
@@ -76,6 +90,10 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
                    help="magnetometer: largest change of a window mean from the previous "
                         "window, in its raw units (counts). 'auto' (default): learnt from its "
                         "noise; 'off': it does not take part")
+    g.add_argument("--hold", type=_hold, default=4, metavar="W",
+                   help="register a pose once it has been still for W windows (the capture's "
+                        "bell, the seed's beep), then average it until the board moves; 'off': "
+                        "decide when the board moves (default 4)")
     g.add_argument("--holdoff", type=_nonnegative_float, default=0.0, metavar="S",
                    help="seconds ignored after each registered pose, to let go of the board "
                         "(the seed waits 2 s after its beep: --holdoff 2). Default 0")
@@ -98,6 +116,7 @@ def settings_from_args(args: Any) -> PoseSettings:
         use_mag=args.mag_threshold != "off",
         gyro_threshold=thr(args.gyro_threshold),
         mag_threshold=thr(args.mag_threshold),
+        hold_windows=args.hold,
         holdoff_s=float(args.holdoff),
         rate_hz=args.rate_hz,
     )
@@ -121,7 +140,7 @@ def stored_settings(stats: Any) -> PoseSettings:
         return PoseSettings.from_dict(d)
     return PoseSettings(window=int(stats.get("pose_window", 25)),
                         counts_per_g=float(stats.get("units_per_g", 16384.0)),
-                        use_gyro=False, use_mag=False)
+                        use_gyro=False, use_mag=False, hold_windows=None)
 
 
 def apply_settings(args: Any, settings: PoseSettings) -> None:
@@ -134,5 +153,6 @@ def apply_settings(args: Any, settings: PoseSettings) -> None:
                            "auto" if settings.gyro_threshold is None else settings.gyro_threshold)
     args.mag_threshold = ("off" if not settings.use_mag else
                           "auto" if settings.mag_threshold is None else settings.mag_threshold)
+    args.hold = settings.hold_windows
     args.holdoff = settings.holdoff_s
     args.rate_hz = settings.rate_hz

@@ -84,9 +84,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-mode-byte", action="store_true",
                    help="do not send the mode byte (P/B/F/T/R) that switches the firmware to "
                         "the protocol; for boards that stream by themselves")
-    p.add_argument("--hold", type=_positive_int, default=4, metavar="W",
-                   help="pose detection: windows before a pose registers and the bell rings, "
-                        "without waiting for the board to move (default 4)")
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
     add_pose_options(p)
@@ -128,7 +125,6 @@ def run(args: argparse.Namespace) -> int:
         mode=mode,
         columns=names,
         detection=settings_from_args(args),
-        hold_windows=args.hold,
         progress=None if args.quiet else out,
         bell=not args.no_bell,
     )

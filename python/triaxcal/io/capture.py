@@ -340,13 +340,11 @@ def capture(
     accel_columns : 3 ints, optional
         Channels of the accelerometer, for pose detection and coverage (default: the ones
         named ``ax ay az``, else the first three).
-    units_per_g, window, threshold_g
+    units_per_g, window, threshold_g, hold_windows
         Shorthands for ``detection`` (:class:`~triaxcal.poses.PoseSettings` ``counts_per_g``
-        -- default: from the first readings --, ``window`` and ``accel_threshold_g``), used
-        when ``detection`` is not given.
-    hold_windows : int
-        A pose is registered (and the bell rings) after this many windows (the seed's beep),
-        without waiting for the board to move; its mean is over those windows.
+        -- default: from the first readings --, ``window``, ``accel_threshold_g`` and
+        ``hold_windows``: a pose is registered, and the bell rings, once it has been still for
+        that many windows), used when ``detection`` is not given.
     detection : PoseSettings, optional
         Pose detection: a pose ends when any sensor of the session says the board moved (the
         same settings give the same poses in ``triaxcal fit --poses`` on the saved file).
@@ -381,11 +379,12 @@ def capture(
 
     reader.on_event = on_event
     settings = detection if detection is not None else PoseSettings(
-        window=window, accel_threshold_g=threshold_g, counts_per_g=units_per_g)
+        window=window, accel_threshold_g=threshold_g, counts_per_g=units_per_g,
+        hold_windows=max(2, int(hold_windows)))
     cols = tuple(accel_columns) if accel_columns is not None else None
     if cols is None and not all(c in names for c in ("ax", "ay", "az")):
         cols = (0, 1, 2)
-    live = _LivePoses(settings, names, cols, hold_windows) if len(names) >= 3 else None
+    live = _LivePoses(settings, names, cols) if len(names) >= 3 else None
     registered: list[Pose] = []
     interrupted = threading.Event()
     t0 = time.monotonic()
@@ -456,6 +455,9 @@ def capture(
     if live is not None and stopped_by != "poses":
         # the end of the stream decides on the pose in progress
         registered += live.finish()[: None if poses is None else poses - len(registered)]
+    if live is not None and live.det is not None:
+        # the same poses, each averaged over its whole still run (the bell rang earlier)
+        registered = live.det.poses[:len(registered)]
     cov = coverage(live.points(registered)) if live is not None and registered else 0.0
     status.line(_status_text(writer.rows, registered, live, last, reader, poses, samples),
                 force=True)
@@ -478,11 +480,10 @@ class _LivePoses:
     """The capture's pose detector: started once the first rows fix what the data decide."""
 
     def __init__(self, settings: PoseSettings, names: Sequence[str],
-                 accel: Sequence[int] | None, hold_windows: int) -> None:
+                 accel: Sequence[int] | None) -> None:
         self.base = settings
         self.names = tuple(names)
         self.accel = accel
-        self.hold = max(2, int(hold_windows))
         self.head: list[Record] = []
         self.det: PoseDetector | None = None
         self.how: ResolvedPoses | None = None
@@ -493,7 +494,7 @@ class _LivePoses:
         # the times as the session file stores them, so that a fit of the file agrees
         t = np.array([float(f"{r.t:.6f}") for r in self.head])
         self.how = self.base.resolve(self.names, vals, accel=self.accel, t=t)
-        self.det = self.how.detector(max_windows=self.hold)
+        self.det = self.how.detector()
         self.head = []
         return self.det.update(vals)
 
