@@ -130,3 +130,32 @@ def test_parts_written_before_store_only_window_and_units():
 
 def test_docstrings_run():
     assert doctest.testmod(poses_mod, raise_on_error=True).failed == 0
+
+
+def test_capture_with_poses_84_stops_by_itself_and_fit_agrees(tmp_path, capsys):
+    # `triaxcal capture --poses 84` on the globe scheme ends by itself (it stopped at 63 when
+    # only the accelerometer ended a pose), and `fit --poses` on the file finds the same poses
+    from triaxcal.cli import main
+    from triaxcal.io.capture import capture
+    from triaxcal.io.serial import SerialReader
+
+    imu = tc.sim.SimIMU(1)
+    # held 1.5 s: long enough for the bell (4 windows) even in the last pose, after which the
+    # simulated board stops sending
+    script = tc.sim.globe_script(hold_s=1.5, seed=1)
+    out = tmp_path / "s.csv"
+    with tc.sim.SimDevice(imu, script, rate_hz=100, speed=40, loop=False, seed=1) as dev:
+        res = capture(SerialReader(dev.port, protocol="framed", channels=10, stream=True), out,
+                      poses=84, duration_s=60, progress=None, bell=False, handle_sigint=False)
+    assert res.stopped_by == "poses" and len(res.poses) == 84 and res.coverage == 1.0
+    assert res.elapsed_s < 30
+    assert res.detection is not None and set(res.thresholds) == {"accel", "gyro", "mag"}
+    cal = tmp_path / "c.json"
+    capsys.readouterr()
+    assert main(["fit", str(out), "--poses", "-o", str(cal)]) == 0
+    part = tc.Calibration.load(cal).accel
+    # the capture stopped at the 84th bell: that pose is cut short in the file, but counts
+    assert part.stats["n_poses"] == 84
+    det, _ = session_poses(NAMES, np.loadtxt(out, delimiter=",", skiprows=1),
+                           res.detection)
+    assert [p.start for p in det.poses] == [p.start for p in res.poses]
