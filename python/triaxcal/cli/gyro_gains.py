@@ -1,15 +1,15 @@
-"""``triaxcal gyro-gains SESSION --angle 90``: gyroscope gains by integrating turns of a known
+"""triaxcal gyro-gains SESSION --angle 90: gyroscope gains by integrating turns of a known
 angle, both ways about every axis (gyro-integration-calibration.txt).
 
-Hold the board still, turn it by ``--angle`` degrees about one of its axes (90 on a cube resting
+Hold the board still, turn it by --angle degrees about one of its axes (90 on a cube resting
 on a table: face to face), hold it still again; clockwise and counter-clockwise about x, y and
 z. Each turn between two still periods is integrated (trapezoid rule), assigned to its axis and
-direction, and gives ``gain = |integral| / angle`` in counts per deg/s. The bias is the mean of
-the still periods. The gains **divide**, as in the seed's ``(raw - offset) / gain``; the part
-written holds ``matrix = diag(1 / gain)`` (it multiplies) and gives deg/s.
+direction, and gives gain = |integral| / angle in counts per deg/s. The bias is the mean of
+the still periods. The gains **divide**, as in the seed's (raw - offset) / gain; the part
+written holds matrix = diag(1 / gain) (it multiplies) and gives deg/s.
 
 Clockwise and counter-clockwise gains of one axis should agree; when they differ by more than
-``--max-asymmetry`` percent the command names the axis and the likely cause.
+--max-asymmetry percent the command names the axis and the likely cause.
 """
 
 from __future__ import annotations

@@ -1,19 +1,19 @@
-"""``triaxcal sphere-center FILE --radius R [--method descent|grid|fit]``: the zero offset as
+"""triaxcal sphere-center FILE --radius R [--method descent|grid|fit]: the zero offset as
 the centre of a sphere of known radius (sphere-center-descent.txt).
 
 The seed's readings lie on a sphere of radius R (16384 counts = 1 g for a 16-bit +-2 g
-accelerometer) around the unknown offset. ``descent`` is its variable-step 26-neighbour
-search: from ``--start`` (0,0,0), move to the neighbour one ``--step`` (1000) away that lowers
-the error sum  sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|, else divide the step by ``--shrink``
-(10), down to ``--min-step`` (0.01). ``grid`` is its brute-force cube search, around the mean
-of the readings, ``--half-width`` wide at ``--step``, repeated around the best node 20 times
-finer down to ``--min-step`` (``--no-refine``: one pass). ``fit`` solves least squares of
+accelerometer) around the unknown offset. descent is its variable-step 26-neighbour
+search: from --start (0,0,0), move to the neighbour one --step (1000) away that lowers
+the error sum  sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|, else divide the step by --shrink
+(10), down to --min-step (0.01). grid is its brute-force cube search, around the mean
+of the readings, --half-width wide at --step, repeated around the best node 20 times
+finer down to --min-step (--no-refine: one pass). fit solves least squares of
 |p - c| - R for the centre alone (Gauss-Newton). Because R is known, a part of the sphere (a
 "wedge") is enough.
 
-The part written holds ``offset`` = the centre and, for the accelerometer, ``matrix`` = I / R
-(R counts = 1 g: ``--scale-to 1g``); for other sensors the offset only, unless ``--scale-to``
-says what R is (``--scale-to 48uT``).
+The part written holds offset = the centre and, for the accelerometer, matrix = I / R
+(R counts = 1 g: --scale-to 1g); for other sensors the offset only, unless --scale-to
+says what R is (--scale-to 48uT).
 """
 
 from __future__ import annotations

@@ -1,18 +1,18 @@
-"""``triaxcal temperature SESSION --sensor gyro --degree 1``: the gyroscope's bias as a
+"""triaxcal temperature SESSION --sensor gyro --degree 1: the gyroscope's bias as a
 polynomial in the temperature change (gyro-integration-calibration.txt).
 
 Cool the board down, then record it lying still while it comes back to room temperature (or
 warm it up). The bias of every axis is fitted by least squares as
-``offset(T) = offset + sum_k c_k (T - T_ref)^k``, degree 1 being the seed's linear
-``tempcomp``: calibrated = (raw - (tempcomp * dT + offset)) / gain. Only the samples of still
-poses are used (the pose detection of ``triaxcal fit --poses``), so a bump does not spoil it.
+offset(T) = offset + sum_k c_k (T - T_ref)^k, degree 1 being the seed's linear
+tempcomp: calibrated = (raw - (tempcomp * dT + offset)) / gain. Only the samples of still
+poses are used (the pose detection of triaxcal fit --poses), so a bump does not spoil it.
 
-If CAL.json has a gyro part already (from ``triaxcal gyro-gains``), its gains are kept and the
+If CAL.json has a gyro part already (from triaxcal gyro-gains), its gains are kept and the
 temperature terms are added to it; otherwise the part is counts in, counts out.
 
-The temperature column: ``temp`` is read as the MPU-6050's raw counts (``T = raw / 340 +
-36.53``, as ``triaxcal capture`` records it); ``temp_c`` / ``temperature`` as deg C; or give
-``--temp-column`` with ``--temp-scale`` and ``--temp-offset`` (deg C = raw * scale + offset).
+The temperature column: temp is read as the MPU-6050's raw counts (T = raw / 340 +
+36.53, as triaxcal capture records it); temp_c / temperature as deg C; or give
+--temp-column with --temp-scale and --temp-offset (deg C = raw * scale + offset).
 """
 
 from __future__ import annotations

@@ -1,19 +1,19 @@
-"""``triaxcal tilt-rig FILE --angle 10``: accelerometer offsets and gains from a rig tilted by a
+"""triaxcal tilt-rig FILE --angle 10: accelerometer offsets and gains from a rig tilted by a
 known angle, nose down / nose up and left down / right down (tilt-rig-gravity-calibration.txt).
 
 FILE holds the readings of the four tilts, in either layout:
 
-* the seed's: a line ``FD`` (fore down), ``AD`` (aft down), ``LD`` (left down) or ``RD`` (right
-  down) -- or ``fore_down``, ... -- followed by that tilt's rows;
-* a label in the first column of every row: ``FD,-0.1429,0.0127,1.0509``.
+* the seed's: a line FD (fore down), AD (aft down), LD (left down) or RD (right
+  down) -- or fore_down, ... -- followed by that tilt's rows;
+* a label in the first column of every row: FD,-0.1429,0.0127,1.0509.
 
-Rows are numbers separated by commas, semicolons, tabs or spaces; ``--columns`` picks the
-accelerometer's three (by zero-based index, or by name with a header row ``ax,ay,az``).
+Rows are numbers separated by commas, semicolons, tabs or spaces; --columns picks the
+accelerometer's three (by zero-based index, or by name with a header row ax,ay,az).
 
-With the seed's algebra corrected (``gain = sin(angle) / |s - s'| * 2``, not ``sin / (s + o)``),
+With the seed's algebra corrected (gain = sin(angle) / |s - s'| * 2, not sin / (s + o)),
 the offsets of x and y and the gains of all three axes follow; z's offset cannot be told
-from its gain without an upside-down reading (``--z-offset``, default 0). The tilt the data
-imply (equal gains assumed) is printed; when it differs from ``--angle`` by more than a degree
+from its gain without an upside-down reading (--z-offset, default 0). The tilt the data
+imply (equal gains assumed) is printed; when it differs from --angle by more than a degree
 the command warns and shows the gains that angle gives.
 """
 
