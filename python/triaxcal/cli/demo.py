@@ -13,6 +13,7 @@ fixed point), the MotionCal packet, and a quality report with a figure per senso
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import sys
@@ -181,7 +182,12 @@ def run_demo(
         "session": str(session),
     }
 
-    # the calibration a user ships: counts in, g / deg/s / uT out
+    # the calibration a user ships: counts in, g / deg/s / uT out. Provenance is the session
+    # file's own SHA-256 (what `triaxcal report` checks), and the still-pose settings that
+    # let the report judge the fits on still poses of that file
+    session_sha = hashlib.sha256(session.read_bytes()).hexdigest()
+    upg = 8192.0 if raw else 16384.0
+    poses_stats = {"poses": True, "pose_window": 25, "units_per_g": upg}
     gyro_part = SensorCalibration(
         offset=gyro_bias,
         matrix=np.eye(3) / GYRO_COUNTS_PER_DPS,  # nominal sensitivity; bias from the poses
@@ -190,13 +196,20 @@ def run_demo(
         model="bias",
         stats={"n_samples": int(len(still))},
         source=str(session),
+        input_sha256=session_sha,
     )
     cal = Calibration(
         accel=SensorCalibration.from_fit(accel_fit, raw_unit="counts", unit="g",
-                                         points=means[:, a_cols], source=str(session)),
+                                         points=means[:, a_cols], source=str(session),
+                                         input_sha256=session_sha,
+                                         extra_stats={**poses_stats,
+                                                      "columns": ["ax", "ay", "az"]}),
         gyro=gyro_part,
         mag=SensorCalibration.from_fit(mag_fit, raw_unit="counts", unit="uT",
-                                       points=means[:, m_cols], source=str(session)),
+                                       points=means[:, m_cols], source=str(session),
+                                       input_sha256=session_sha,
+                                       extra_stats={**poses_stats,
+                                                    "columns": ["mx", "my", "mz"]}),
         sensor_id=f"triaxcal-sim-seed{seed}",
     )
     outputs = write_outputs(

@@ -23,6 +23,7 @@ from typing import Any
 
 from ..calibration import SENSORS, Calibration
 from ..errors import CalibrationError
+from ..io.files import os_error_message, write_file
 from ..io.motioncal import (
     MotionCalPacket,
     decode_motioncal,
@@ -68,19 +69,23 @@ def export(
     prefix: str = "triaxcal",
     counts_per_unit: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write ``cal`` in format ``fmt`` (one of :data:`EXPORT_FORMATS`) to ``path``."""
-    p = Path(path)
+    """Write ``cal`` in format ``fmt`` (one of :data:`EXPORT_FORMATS`) to ``path``.
+
+    The file is written whole and atomically (:func:`triaxcal.io.files.write_file`); a
+    failure (missing folder, full disk) raises :class:`CalibrationError` saying what to do.
+    """
+    data: str | bytes
     if fmt == "c":
-        p.write_text(c_header(cal, prefix=prefix), encoding="utf-8")
+        data = c_header(cal, prefix=prefix)
     elif fmt == "c-fixed":
-        p.write_text(c_fixed_header(cal, prefix=prefix), encoding="utf-8")
+        data = c_fixed_header(cal, prefix=prefix)
     elif fmt == "json":
-        p.write_text(cal.to_json(), encoding="utf-8")
+        data = cal.to_json()
     elif fmt == "motioncal":
-        p.write_bytes(motioncal_packet(cal, counts_per_unit=counts_per_unit))
+        data = motioncal_packet(cal, counts_per_unit=counts_per_unit)
     else:
         raise CalibrationError(f"unknown export format {fmt!r}: use one of {EXPORT_FORMATS}")
-    return p
+    return write_file(path, data, what=f"{fmt} export")
 
 
 def write_outputs(
@@ -102,7 +107,10 @@ def write_outputs(
     from .. import report as _report
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CalibrationError(os_error_message(exc, out, "create")) from None
     paths: dict[str, Path] = {}
     paths["json"] = cal.save(out / "calibration.json")
     p = _ident(prefix)
@@ -118,7 +126,7 @@ def write_outputs(
             continue
         rep = _report.quality_report(pts, cal.part(sensor), sensor=sensor)
         txt = out / f"report_{sensor}.txt"
-        txt.write_text(rep.text() + "\n", encoding="utf-8")
+        write_file(txt, rep.text() + "\n", what="report")
         paths[f"report_{sensor}"] = txt
         if plot and _report.have_matplotlib():
             paths[f"figure_{sensor}"] = _report.plot_report(

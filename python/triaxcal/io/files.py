@@ -33,6 +33,9 @@ def os_error_message(exc: OSError, path: Any, action: str = "write") -> str:
         why = "no space left on the disk that holds it; free some space or choose another place"
     elif code == getattr(errno, "EDQUOT", -1):
         why = "your disk quota is used up; free some space or choose another place"
+    elif code == errno.EFBIG:
+        why = ("the file has reached the largest size allowed here (a file size limit); free "
+               "some space or choose another place")
     elif code == errno.EISDIR:
         why = f"it is a folder; give a file name inside it (e.g. {p / 'name'})"
     elif code == errno.ENOTDIR:
