@@ -68,7 +68,7 @@ RULES = [
      "not a known model"),
     ("model not text", lambda d: _acc(d).update(model=3), "accel.model must be text"),
     ("offset_poly of degree 4", lambda d: _acc(d)["temperature"].update(
-        offset_poly=[[0, 0, 0]] * 5), "1 to 4 rows"),
+        offset_poly=[[0, 0, 0]] * 5), "at most degree 3"),
     ("gain_poly with 4 columns", lambda d: _acc(d)["temperature"].update(
         gain_poly=[[0, 0, 0, 0], [1, 2, 3, 4]]), "shape"),
     ("gain_poly ragged", lambda d: _acc(d)["temperature"].update(

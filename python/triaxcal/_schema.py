@@ -442,8 +442,9 @@ def poly(value: Any, what: str) -> np.ndarray:
     arr = reals(value, (-1, 3), what)
     if not 1 <= arr.shape[0] <= MAX_POLY_DEGREE + 1:
         raise CalibrationError(
-            f"{what} must have 1 to {MAX_POLY_DEGREE + 1} rows (degree 0 to {MAX_POLY_DEGREE}, "
-            f"lowest order first) of 3 columns; got {arr.shape[0]} rows"
+            f"{what} has {arr.shape[0]} rows (degree {arr.shape[0] - 1}); it must have 1 to "
+            f"{MAX_POLY_DEGREE + 1} rows of 3 columns, lowest order first: at most degree "
+            f"{MAX_POLY_DEGREE}"
         )
     return arr
 

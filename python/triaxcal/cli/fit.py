@@ -1,13 +1,15 @@
-"""``triaxcal fit SESSION.csv --sensor {accel,gyro,mag} [--columns ...] [--model ...]
+"""``triaxcal fit SESSION.csv|LOG --sensor {accel,gyro,mag} [--columns ...] [--model ...]
 [--radius ...] -o CAL.json``: fit one sensor's readings and write (or update) a calibration file.
 
 Input: a session CSV from ``triaxcal capture`` (header ``t,ax,ay,az,...``) or any table of
 numbers -- comma, semicolon, tab or space separated, with or without a header row (detected),
-read by :func:`triaxcal.io.tables.read_table`. ``--columns`` picks three columns by name or
-zero-based index (``ax,ay,az`` or ``0,1,2``); by default the sensor's named columns, or the
-first three of a headerless file. ``--poses`` first reduces a raw time series to still-pose
-means (:func:`triaxcal.detect.detect_poses`). Outliers are rejected by the iterated 2-sigma
-rule on vector lengths (``--sigma 0`` disables).
+read by :func:`triaxcal.io.tables.read_table`; or a log: PX4 ``.ulg``, ArduPilot ``.bin``, ROS
+``.bag`` / ``.db3`` / ``.mcap`` (``--instance``, ``--topic``, ``--undo-autopilot-cal``; the raw
+unit is the log's). ``--columns`` picks three columns by name or zero-based index
+(``ax,ay,az`` or ``0,1,2``); by default the sensor's named columns, or the first three of a
+headerless file. ``--poses`` first reduces a raw time series to still-pose means
+(:func:`triaxcal.detect.detect_poses`). Outliers are rejected by the iterated 2-sigma rule on
+vector lengths (``--sigma 0`` disables).
 
 A fit that did not converge, or whose readings cover too little of the sphere to determine
 its model, is not written: the command exits with status 2 and says what to record instead
@@ -30,6 +32,7 @@ from ..fit import MODELS
 from ..io.files import check_output
 from ..io.tables import SENSOR_COLUMNS, Table, pick_columns, read_table
 from ..units import implausible_radius
+from ._source import Source, add_source_options, autopilot_lines, autopilot_stats, load_source
 
 __all__ = ["SENSOR_COLUMNS", "Table", "parse_radius", "pick_columns", "read_table"]
 
@@ -120,8 +123,8 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "gyro/mag: the data's own")
     p.add_argument("--unit", default=None,
                    help="calibrated unit to record (default: from --radius)")
-    p.add_argument("--raw-unit", default="counts",
-                   help="unit of the raw readings (default: counts)")
+    p.add_argument("--raw-unit", default=None,
+                   help="unit of the raw readings (default: counts; a log's own unit)")
     p.add_argument("--sigma", type=float, default=2.0,
                    help="reject readings whose length is more than SIGMA standard deviations "
                         "from the mean (Magneto's rule), iterated; 0 disables (default 2)")
@@ -141,6 +144,7 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skip-bad-lines", action="store_true",
                    help="skip lines of the data file that are not a row of numbers (and count "
                         "them) instead of stopping at the first one")
+    add_source_options(p)
 
 
 @dataclass
@@ -152,7 +156,8 @@ class FitOutcome:
     sensor: str
     rejected: np.ndarray
     reason: str | None
-    table: Table
+    table: Table | None
+    source: Source | None = None
     #: Things to tell the user about the input (skipped lines, an implausible radius).
     notes: list[str] = field(default_factory=list)
 
@@ -186,36 +191,39 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     elif DEFAULT_RADIUS[sensor] is not None:
         radius, unit = DEFAULT_RADIUS[sensor]  # type: ignore[misc]
     else:
-        radius, unit = None, args.raw_unit
+        radius, unit = None, None
     if args.unit:
         unit = args.unit
     if args.rounds < 0:
         raise CalibrationError("--rounds must be >= 0")
-    table = read_table(args.data, skip_bad_lines=getattr(args, "skip_bad_lines", False))
-    notes += [f"note: {n}" for n in table.notes]
-    cols = pick_columns(table, args.columns, sensor)
-    pts = _pose_points(table, cols, args) if args.poses else table.data[:, cols]
+    src = load_source(args.data, sensor, args)
+    table, pts = src.table, src.points
+    if table is not None:
+        notes += [f"note: {n}" for n in table.notes]
     rob = fit_robust(pts, model=args.model, radius=radius, sigma=args.sigma,
                      max_rounds=args.rounds, lengths=args.reject_on)
     extra: dict[str, Any] = {
-        "columns": [table.names[c] if table.names else c for c in cols],
+        "columns": src.columns,
         "poses": bool(args.poses),
         "n_input": len(pts),
         "sigma": float(args.sigma),
         "rejection_rounds": int(rob.rounds),
     }
-    if table.skipped:
+    if table is not None and table.skipped:
         extra["lines_skipped"] = int(table.skipped)
     if args.poses:
         extra["pose_window"] = int(args.window)
         extra["units_per_g"] = float(args.units_per_g)
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
+    extra.update(src.extra)
+    extra.update(autopilot_stats(src, sensor))
     from ..report import coverage
 
+    raw_unit = args.raw_unit or src.raw_unit or "counts"
     part = SensorCalibration.from_fit(
-        rob.fit, raw_unit=args.raw_unit, unit=unit, points=pts[rob.inliers],
-        rejected=rob.rejected, input_sha256=table.sha256, source=str(table.path),
+        rob.fit, raw_unit=raw_unit, unit=unit or raw_unit, points=pts[rob.inliers],
+        rejected=rob.rejected, input_sha256=src.sha256, source=str(src.path),
         extra_stats=extra,
     )
     stats = dict(part.stats)
@@ -224,7 +232,7 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
                          *(n[len("warning: "):] for n in notes if n.startswith("warning: "))]
     part = SensorCalibration(**{**_fields(part), "stats": stats})
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
-                      reason=rob.model_reason, table=table, notes=notes)
+                      reason=rob.model_reason, table=table, source=src, notes=notes)
 
 
 def _fields(part: SensorCalibration) -> dict[str, Any]:
@@ -274,8 +282,8 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("data", metavar="SESSION.csv",
-                   help="session CSV from triaxcal capture, or any table of numbers")
+    p.add_argument("data", metavar="SESSION.csv|LOG",
+                   help="session CSV, any numeric table, or a log (.ulg, .bin, .bag, .db3, .mcap)")
     add_fit_options(p)
     p.add_argument("-o", "--output", required=True, metavar="CAL.json",
                    help="calibration file to write; an existing one keeps its other sensors")
@@ -343,6 +351,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"  model: {out.reason}")
     for w in s.get("warnings", []):
         print(f"  warning: {w}")
+    if out.source is not None and out.source.recording is not None:
+        for line in autopilot_lines(out.source, out.sensor, out.part.offset, out.part.matrix,
+                                    out.part.unit):
+            print(line)
+        for w in out.source.recording.meta.get("warnings", []):
+            print(f"  warning: {w}")
     return 0
 
 
