@@ -137,9 +137,9 @@ def test_plot_needs_matplotlib(monkeypatch, tmp_path):
 
 def test_readme_export_section_python_runs(realdata, tmp_path, monkeypatch, capsys):
     """The Python example of the README's export section runs as written."""
-    text = (ROOT / "README.md").read_text()
-    section = text.split("<!-- section: export (owner: export) -->", 1)[1].split(
-        "<!-- /section -->", 1)[0]
+    from conftest import readme_section
+
+    section = readme_section("Calibration files, firmware export, quality report")
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
     raw = np.loadtxt(realdata / "icm20948-magneto" / "icm_20948_cal_acc.csv", delimiter=",")
     monkeypatch.chdir(tmp_path)

@@ -452,9 +452,9 @@ def test_request_byte_forms():
 
 
 def test_readme_capture_section_names_the_command():
-    text = (ROOT / "README.md").read_text()
-    start = text.index("<!-- section: capture")
-    section = text[start:text.index("<!-- /section -->", start)]
+    from conftest import readme_section
+
+    section = readme_section("Capture")
     assert "triaxcal capture --port" in section and "triaxcal demo" in section
 
 
