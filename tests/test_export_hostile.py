@@ -160,6 +160,7 @@ def test_hostile_file_cannot_inject_code(tmp_path, case):
         _compile_and_inspect(tmp_path, c_fixed_header(cal, prefix="imu"), f"{case}-fixed", True)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(GCC is None or NM is None, reason="gcc and nm needed")
 @pytest.mark.parametrize("case", sorted(CORPUS))
 def test_generator_alone_neutralises_every_string(tmp_path, case):
