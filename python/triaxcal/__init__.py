@@ -47,6 +47,7 @@ from .fit import (
 )
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
+from .io.tables import Table, read_table
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -99,6 +100,8 @@ __all__ = [
     "kalibr_imu_yaml",
     "px4_params_file",
     "read_log",
+    "read_table",
+    "Table",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",

@@ -36,6 +36,7 @@ from .calibration import SensorCalibration
 from .coverage import Coverage, coverage_warning, sphere_cells
 from .coverage import coverage as shared_coverage
 from .errors import CalibrationError
+from .units import per_unit
 
 __all__ = [
     "QualityReport",
@@ -244,7 +245,7 @@ class QualityReport:
             lines.append("  standard errors")
             for k, v in self.stderr.items():
                 unit = (self.raw_unit if k.startswith("offset") or k == "data_radius"
-                        else f"{u}/{self.raw_unit}" if u != self.raw_unit else "(ratio)")
+                        else per_unit(u, self.raw_unit, short=True))
                 lines.append(f"    {k:<12} {v:.3g} {unit}")
         if self.rejected:
             shown = ", ".join(str(i) for i in self.rejected[:30])

@@ -79,10 +79,11 @@ def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Sour
                 f"--instance, --topic and --undo-autopilot-cal apply to logs (.ulg, .bin, .bag, "
                 f".db3, .mcap); {p} is read as a table"
             )
+        from ..io.tables import pick_columns, read_table
         from ._poses import settings_from_args
-        from .fit import pick_columns, pose_points, read_table
+        from .fit import pose_points
 
-        table = read_table(p)
+        table = read_table(p, skip_bad_lines=bool(getattr(args, "skip_bad_lines", False)))
         cols = pick_columns(table, getattr(args, "columns", None), sensor)
         pose_stats: dict[str, Any] = {}
         if getattr(args, "poses", False):  # the capture's pose detection, every sensor

@@ -3,7 +3,9 @@
 With a session / data file: fit it as ``triaxcal fit`` would (same options) and report. With a
 calibration file: report each part on its input data -- the file named in the calibration
 (as recorded, or next to CAL.json, and checked against the stored SHA-256) or
-the one given with ``--data``; without data, the statistics stored at fit time.
+the one given with ``--data``; without data, the statistics stored at fit time. A part that
+is not a fit of readings to a sphere (e.g. a gyroscope bias) is always reported from its
+stored statistics.
 """
 
 from __future__ import annotations
@@ -16,13 +18,16 @@ from typing import Any
 
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
+from ..fit import MODELS
+from ..io.files import check_output, write_file
 from ..io.logs import is_log
+from ..io.tables import pick_columns, read_table
 from ..report import QualityReport, plot_report, quality_report
 from ._calfile import file_sha256
 from ._method_parts import summary_only, summary_text, tilt_points
 from ._poses import apply_settings, stored_settings
 from ._source import load_source
-from .fit import add_fit_options, fit_file, pick_columns, pose_points, read_table
+from .fit import add_fit_options, fit_file, pose_points
 
 
 def register(subparsers: Any) -> None:
@@ -32,7 +37,9 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("data", metavar="SESSION.csv|CAL.json")
+    p.add_argument("data", metavar="SESSION.csv|LOG|CAL.json",
+                   help="a session CSV, table of numbers or log to fit and report, or a "
+                        "calibration file to judge on its data")
     p.add_argument("--plot", metavar="FIG.png", default=None,
                    help="save the figure (needs matplotlib: pip install 'triaxcal[plot]'); with "
                         "several sensors, the sensor name is added before .png")
@@ -48,7 +55,8 @@ def _is_calibration(path: Path) -> bool:
     if path.suffix.lower() == ".json":
         return True
     try:
-        head = path.read_bytes()[:200].lstrip()
+        with open(path, "rb") as f:
+            head = f.read(200).lstrip()
     except OSError:
         return False
     return head.startswith(b"{")
@@ -119,6 +127,15 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.data)
     if not path.exists():
         raise CalibrationError(f"{path} not found")
+    if path.is_dir() and not is_log(path):
+        raise CalibrationError(
+            f"{path} is a folder: give the calibration file or the session CSV inside it"
+        )
+    if args.plot:
+        check_output(args.plot, "figure")
+    if args.json_out:
+        check_output(args.json_out, "report")
+    skip = getattr(args, "skip_bad_lines", False)
     reports: dict[str, QualityReport] = {}
     if _is_calibration(path):
         cal = Calibration.load(path)
@@ -126,6 +143,11 @@ def run(args: argparse.Namespace) -> int:
         for sensor in sensors:
             part = cal.part(sensor)
             src = Path(args.data_file) if args.data_file else _find_source(path, part)
+            if src is not None and part.model not in MODELS:
+                print(_stored_text(sensor, part).replace(
+                    "(pass --data FILE for the full report and figure)",
+                    f"(model {part.model!r} is not a fit to a sphere: no figure)"))
+                continue
             if src is None:
                 print(_stored_text(sensor, part))
                 if args.plot:
@@ -147,7 +169,9 @@ def run(args: argparse.Namespace) -> int:
             if part.stats.get("method") == "tilt-rig":
                 pts, sha = tilt_points(src, part), file_sha256(src)
             else:
-                table = read_table(src)
+                table = read_table(src, skip_bad_lines=skip)
+                for n in table.notes:
+                    print(f"  note: {n}", file=sys.stderr)
                 sha = table.sha256
                 cols_spec = args.columns or ",".join(
                     str(c) for c in part.stats.get("columns", []))
@@ -174,6 +198,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  figure: {out}")
     else:
         res = fit_file(args)
+        for n in res.notes:
+            print(f"  {n}", file=sys.stderr)
         rep = quality_report(res.points, res.part, sensor=res.sensor,
                              rejected=res.rejected.tolist(), model_reason=res.reason)
         reports[res.sensor] = rep
@@ -182,9 +208,8 @@ def run(args: argparse.Namespace) -> int:
             out = plot_report(res.points, res.part, args.plot, report=rep)
             print(f"  figure: {out}")
     if args.json_out:
-        Path(args.json_out).write_text(
-            json.dumps({k: r.to_dict() for k, r in reports.items()}, indent=2) + "\n",
-            encoding="utf-8",
-        )
+        write_file(args.json_out,
+                   json.dumps({k: r.to_dict() for k, r in reports.items()}, indent=2) + "\n",
+                   what="report")
         print(f"  numbers: {args.json_out}")
     return 0

@@ -17,15 +17,17 @@ way to turn the board next.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import signal
+import stat
 import sys
 import threading
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, BinaryIO, TextIO
 
 import numpy as np
 
@@ -34,11 +36,13 @@ from ..coverage import sphere_cells, suggest_turn
 from ..detect import Pose, PoseDetector
 from ..errors import CalibrationError
 from ..poses import HEAD_ROWS, PoseSettings, ResolvedPoses
+from .files import os_error_message
 from .protocol import CHANNELS_7, CHANNELS_10
 from .serial import ReaderStats, Record, SerialReader
 
 __all__ = [
     "CaptureResult",
+    "SessionWriteError",
     "SessionWriter",
     "capture",
     "channel_names",
@@ -76,8 +80,28 @@ def _fmt(v: Any) -> str:
     return repr(float(v))
 
 
+class SessionWriteError(CalibrationError):
+    """The session file could not be written (a full disk, a file size limit, a read-only
+    or vanished place). ``rows`` whole rows are safe in ``path``; the capture stopped."""
+
+    def __init__(self, message: str, *, path: Path, rows: int) -> None:
+        super().__init__(message)
+        self.path = path
+        self.rows = rows
+
+
+# fsync is not possible on some files (pipes, some devices); that is no reason to stop.
+_FSYNC_UNSUPPORTED = {errno.EINVAL, errno.EROFS, errno.ENOTSUP,
+                      getattr(errno, "EOPNOTSUPP", errno.ENOTSUP)}
+
+
 class SessionWriter:
     """Append records to a session CSV as they arrive; nothing written is ever lost.
+
+    Rows are written whole: when the disk fills up (or the file cannot grow for another
+    reason) the file is cut back to the end of the last whole row and
+    :class:`SessionWriteError` says how many rows are safe in it. Opening a session to
+    append to it first removes a row cut short by an earlier crash.
 
     Parameters
     ----------
@@ -100,64 +124,123 @@ class SessionWriter:
         self.k = len(columns)
         self.fsync_s = float(fsync_s)
         self.rows = 0
+        self.created = False  # whether this writer made the file (so may remove it)
+        self._failed = False
+        self._synced = 0.0
         header = ",".join(self.columns)
-        exists = self.path.exists() and self.path.stat().st_size > 0
         if mode not in ("new", "append", "overwrite"):
             raise CalibrationError(f"mode must be 'new', 'append' or 'overwrite', got {mode!r}")
-        if exists and mode == "new":
-            raise CalibrationError(
-                f"{self.path} exists already: pass another --out, or --append to add to it, "
-                "or --overwrite to replace it"
-            )
-        if exists and mode == "append":
-            with open(self.path, encoding="ascii", errors="replace") as f:
-                first = f.readline().strip()
-            if first != header:
+        try:
+            st = os.stat(self.path) if self.path.exists() else None
+            regular = st is None or stat.S_ISREG(st.st_mode)
+            exists = st is not None and regular and st.st_size > 0
+            if st is not None and stat.S_ISDIR(st.st_mode):
                 raise CalibrationError(
-                    f"cannot append to {self.path}: its header {first!r} differs from "
-                    f"{header!r} (other protocol or channel count?)"
+                    f"{self.path} is a folder: give a file name inside it, e.g. "
+                    f"{self.path / 'session.csv'}"
                 )
-            self._f: TextIO = open(self.path, "a", encoding="ascii", newline="")  # noqa: SIM115
-            self._ensure_newline()
-        else:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._f = open(self.path, "w", encoding="ascii", newline="")  # noqa: SIM115
-            self._f.write(header + "\n")
+            if exists and mode == "new":
+                raise CalibrationError(
+                    f"{self.path} exists already: pass another --out, or --append to add to "
+                    "it, or --overwrite to replace it"
+                )
+            if exists and mode == "append":
+                with open(self.path, encoding="ascii", errors="replace") as f:
+                    first = f.readline(65536).strip()
+                if first != header:
+                    raise CalibrationError(
+                        f"cannot append to {self.path}: its header {first[:200]!r} differs "
+                        f"from {header!r} (other protocol or channel count?)"
+                    )
+                self._good = _drop_cut_row(self.path)
+                self._f: BinaryIO = open(self.path, "ab")  # noqa: SIM115
+            else:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self.created = st is None
+                self._f = open(self.path, "wb")  # noqa: SIM115
+                self._good = 0
+                self._put((header + "\n").encode("ascii"))
+        except OSError as exc:
+            self._fail(exc)
         self._flush(force=True)
 
-    def _ensure_newline(self) -> None:
-        with open(self.path, "rb") as f:
-            f.seek(-1, os.SEEK_END)
-            last = f.read(1)
-        if last != b"\n":  # a row cut by a crash: end it, readers skip short rows
-            self._f.write("\n")
+    def _put(self, data: bytes) -> None:
+        """Write ``data`` (whole rows), flush, and count it as safe."""
+        try:
+            self._f.write(data)
+            self._flush()
+        except OSError as exc:
+            self._fail(exc)
+        self._good += len(data)
 
     def write(self, records: Iterable[Record]) -> int:
-        """Write rows for ``records`` (host time, values), flush; returns rows written."""
+        """Write rows for ``records`` (host time, values), flush; returns rows written.
+
+        Raises
+        ------
+        SessionWriteError
+            When the rows cannot be written; the rows written before are safe.
+        """
+        if self._failed:
+            raise CalibrationError(f"{self.path}: writing has stopped after an error")
         lines = []
         for t, values in records:
             if len(values) != self.k:
                 continue  # a decoder never returns these; be safe with hand-made records
             lines.append(f"{t:.6f}," + ",".join(_fmt(v) for v in values) + "\n")
         if lines:
-            self._f.write("".join(lines))
+            self._put("".join(lines).encode("ascii"))
             self.rows += len(lines)
-            self._flush()
         return len(lines)
 
     def _flush(self, force: bool = False) -> None:
-        self._f.flush()
-        now = time.monotonic()
-        if force or now - getattr(self, "_synced", 0.0) >= self.fsync_s:
+        if self._failed:
+            return
+        try:
+            self._f.flush()
+            now = time.monotonic()
+            if force or now - self._synced >= self.fsync_s:
+                try:
+                    os.fsync(self._f.fileno())
+                except OSError as exc:
+                    if exc.errno not in _FSYNC_UNSUPPORTED:
+                        raise
+                self._synced = now
+        except OSError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        """Close, cut the file back to its last whole row, and raise SessionWriteError."""
+        self._failed = True
+        f = getattr(self, "_f", None)
+        if f is not None:
             with contextlib.suppress(OSError):
-                os.fsync(self._f.fileno())
-            self._synced = now
+                f.close()  # may try (and fail) to write what is still buffered
+        cut = False
+        good = getattr(self, "_good", 0)
+        with contextlib.suppress(OSError):
+            if stat.S_ISREG(os.stat(self.path).st_mode):
+                if os.stat(self.path).st_size > good:
+                    os.truncate(self.path, good)
+                cut = True
+        if self.rows == 0:
+            safe = "nothing was captured"
+        else:
+            safe = (f"the capture stopped; the first {self.rows} rows are safe in {self.path}"
+                    + ("" if cut else " (its last row may be cut short; triaxcal fit skips "
+                                      "such a row)"))
+        raise SessionWriteError(f"{os_error_message(exc, self.path)}; {safe}",
+                                path=self.path, rows=self.rows) from None
 
     def close(self) -> None:
         """Flush, fsync and close (idempotent)."""
-        if not self._f.closed:
-            self._flush(force=True)
+        if self._failed or self._f.closed:
+            return
+        self._flush(force=True)
+        try:
             self._f.close()
+        except OSError as exc:
+            self._fail(exc)
 
     def __enter__(self) -> SessionWriter:  # noqa: PYI034
         return self
@@ -166,25 +249,38 @@ class SessionWriter:
         self.close()
 
 
+def _drop_cut_row(path: Path) -> int:
+    """Cut a regular file back to its last line break (a row cut short by a crash); returns
+    the new size."""
+    with open(path, "rb+") as f:
+        size = f.seek(0, os.SEEK_END)
+        pos = size
+        while pos > 0:
+            step = min(65536, pos)
+            f.seek(pos - step)
+            chunk = f.read(step)
+            i = chunk.rfind(b"\n")
+            if i >= 0:
+                end = pos - step + i + 1
+                if end < size:
+                    f.truncate(end)
+                return end
+            pos -= step
+        return size
+
+
 def read_session(path: Any) -> tuple[tuple[str, ...], np.ndarray]:
     """Read a session CSV: ``(columns, data)`` with ``data`` float64 of shape (N, 1 + K).
 
-    Rows with a wrong number of fields (a row cut by a power cut) are skipped.
+    Rows that are not whole (a row cut by a power cut or a full disk) are skipped; see
+    :func:`triaxcal.io.tables.read_table` for a reader that reports them.
     """
-    with open(path, encoding="ascii", errors="replace") as f:
-        header = f.readline().strip().split(",")
-        if not header or header[0] != "t":
-            raise CalibrationError(f"{path} is not a session CSV: its first column must be 't'")
-        rows = []
-        for line in f:
-            parts = line.strip().split(",")
-            if len(parts) != len(header):
-                continue
-            try:
-                rows.append([float(p) for p in parts])
-            except ValueError:
-                continue
-    return tuple(header), np.array(rows, dtype=np.float64).reshape(-1, len(header))
+    from .tables import read_table
+
+    table = read_table(path, skip_bad_lines=True, allow_empty=True)
+    if not table.names or table.names[0] != "t":
+        raise CalibrationError(f"{path} is not a session CSV: its first column must be 't'")
+    return table.names, table.data
 
 
 # ------------------------------------------------------------------------- sphere coverage
@@ -442,8 +538,9 @@ def capture(
     except BaseException:
         # a failed start (silent board, wrong baud rate) leaves no empty session behind that
         # would block running the same command again
-        writer.close()
-        if writer.rows == 0 and mode != "append":
+        with contextlib.suppress(CalibrationError):
+            writer.close()
+        if writer.rows == 0 and writer.created and writer.path.is_file():
             with contextlib.suppress(OSError):
                 writer.path.unlink()
         status.end()
