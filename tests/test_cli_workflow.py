@@ -90,7 +90,7 @@ def test_readme_workflow_runs_as_written_on_the_demo_files(demo_dir, tmp_path, m
     monkeypatch.chdir(tmp_path)
     lines = _workflow_lines()
     assert [a[0] for a in lines] == ["capture", "fit", "fit", "report", "export", "export",
-                                     "export", "send"]
+                                     "export", "export", "export", "send"]
     with sim.SimDevice(speed=10) as dev:
         for argv in lines:
             if argv[0] == "capture":
@@ -111,7 +111,8 @@ def test_readme_workflow_runs_as_written_on_the_demo_files(demo_dir, tmp_path, m
     np.testing.assert_allclose(cal.accel.offset, demo.accel.offset, atol=10)
     np.testing.assert_allclose(np.diag(cal.accel.matrix), np.diag(demo.accel.matrix), rtol=1e-3)
     for name in ("report_accel.png", "report_mag.png", "imu_calibration.h",
-                 "imu_calibration_fixed.h", "motioncal.bin"):
+                 "imu_calibration_fixed.h", "motioncal.bin", "calibration.mjs",
+                 "calibration.js"):
         assert Path(name).stat().st_size > 0, name
 
 
