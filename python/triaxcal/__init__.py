@@ -40,6 +40,7 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .methods.allan import AllanAccumulator, AllanDeviation, allan
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -56,6 +57,7 @@ from .methods.imu import (
     TriadCalibration,
     calibrate_imu,
 )
+from .methods.noise import AxisNoise, NoiseFigures, kalibr_noise, noise_figures, plot_allan
 from .methods.static import (
     FerrarisCalibration,
     SixPosition,
@@ -69,6 +71,14 @@ from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "AllanAccumulator",
+    "AllanDeviation",
+    "AxisNoise",
+    "NoiseFigures",
+    "allan",
+    "kalibr_noise",
+    "noise_figures",
+    "plot_allan",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",

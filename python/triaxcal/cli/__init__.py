@@ -12,7 +12,7 @@ from .. import __version__
 from ..errors import CalibrationError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("demo", "capture", "fit", "export", "report", "send")
+COMMANDS = ("demo", "capture", "fit", "export", "report", "send", "noise", "diff")
 
 
 def build_parser() -> argparse.ArgumentParser:
