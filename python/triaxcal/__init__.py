@@ -19,11 +19,15 @@ from .detect import (
 )
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .export import (
+    adafruit_calib_json,
+    ardupilot_parm,
     c_fixed_header,
     c_header,
     decode_motioncal,
     encode_motioncal,
+    kalibr_imu_yaml,
     motioncal_packet,
+    px4_params_file,
     write_outputs,
 )
 from .fit import (
@@ -40,6 +44,8 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .io.logs import read_log
+from .io.recording import LogRecording, Stream
 from .methods.allan import AllanAccumulator, AllanDeviation, allan
 from .methods.gyro import (
     GyroBias,
@@ -79,6 +85,13 @@ __all__ = [
     "kalibr_noise",
     "noise_figures",
     "plot_allan",
+    "LogRecording",
+    "Stream",
+    "adafruit_calib_json",
+    "ardupilot_parm",
+    "kalibr_imu_yaml",
+    "px4_params_file",
+    "read_log",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",
