@@ -338,3 +338,35 @@ def test_cli_refuses_what_it_cannot_do(still_session, tmp_path, capsys):
     assert "not numbers" in capsys.readouterr().err
     assert main(["noise", str(still_session), "--counts-per-unit", "131"]) == 1
     assert "needs --unit" in capsys.readouterr().err
+
+
+def test_cli_reads_an_autopilot_log_at_rest(realdata, capsys):
+    """PX4's sample_log_small.ulg: 6.3 s of sensor_combined at ~205 Hz on a bench (rad/s)."""
+    pytest.importorskip("pyulog")
+    log = realdata / "px4-pyulog-samples" / "sample_log_small.ulg"
+    assert main(["noise", str(log), "--format", "json"]) == 0
+    captured = capsys.readouterr()
+    d = __import__("json").loads(captured.out)["gyro"]
+    assert d["unit"] == "rad/s" and 200 < d["rate_hz"] < 210
+    assert "too short to measure rate random walk" in captured.err
+    # up to 1 s the deviation falls as N / sqrt(tau) (white noise), with a bump near 0.08 s (a
+    # vibration of about 6 Hz on the bench): the fitted N is the typical sqrt(tau) * sigma there
+    rec = tc.read_log(log)
+    ad = tc.allan(np.asarray(rec.stream("gyro").data), rec.stream("gyro").rate_hz, taus="log")
+    white = ad.taus <= 1.0
+    for k, ax in enumerate("xyz"):
+        typical = float(np.median(ad.adev[white, k] * np.sqrt(ad.taus[white])))
+        assert d["axes"][ax]["white"] == pytest.approx(typical, rel=0.15)
+        assert d["axes"][ax]["resolved"]["white"]
+
+
+def test_cli_writes_the_json_that_export_takes(still_session, tmp_path, capsys):
+    out = tmp_path / "noise.json"
+    assert main(["noise", str(still_session), "--sensor", "both", "--unit",
+                 "gyro=deg/s,accel=g", "--counts-per-unit", "gyro=131,accel=16384",
+                 "--format", "kalibr", "-o", str(out)]) == 0
+    noise = __import__("json").loads(out.read_text())
+    from triaxcal.export.kalibr import kalibr_imu_yaml
+
+    text = kalibr_imu_yaml(None, topic="/imu0", rate_hz=50.0, model="calibrated", noise=noise)
+    assert f"gyroscope_noise_density: {noise['gyroscope_noise_density']!r}" in text

@@ -230,6 +230,10 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", type=int, default=25, help="pose detection window (samples)")
     p.add_argument("--units-per-g", type=float, default=16384.0,
                    help="accelerometer counts per g, for --poses (16384 at +-2 g)")
+    p.add_argument("--bootstrap", type=int, default=0, metavar="N",
+                   help="also compute 95 %% bootstrap intervals of every coefficient from N "
+                        "refits (e.g. 1000, fixed seed), stored in the calibration, shown by "
+                        "report and used by diff")
     add_source_options(p)
 
 
@@ -304,6 +308,13 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     )
     stats = dict(part.stats)
     stats["coverage_pct"] = coverage(part.apply(pts[rob.inliers]))[1]
+    if getattr(args, "bootstrap", 0):
+        from ..methods.bootstrap import bootstrap
+
+        ci = bootstrap(pts[rob.inliers], fit=rob.fit, radius=radius, n_boot=args.bootstrap,
+                       raw_unit=raw_unit, unit=unit)
+        stats["intervals"] = ci.as_dict()
+        stats["warnings"] = list(stats.get("warnings", [])) + ci.warnings()
     part = SensorCalibration(**{**_fields(part), "stats": stats})
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
                       reason=rob.model_reason, table=table, source=src)

@@ -4,13 +4,16 @@ noise figures of a sensor logged at rest.
 
 Reads a session CSV from ``triaxcal capture`` (header ``t,ax,ay,az,gx,gy,gz,...``) or any
 numeric table (``--columns`` picks three columns), chunk by chunk, so a 24-hour log never sits
-in memory; computes the overlapping Allan deviation in the Rust core and fits angle / velocity
+in memory, or an autopilot / ROS log (``.ulg``, ``.bin``, ``.bag``, ``.db3``, ``.mcap``: see
+``triaxcal fit``'s ``--instance``, ``--topic``, ``--undo-autopilot-cal``); computes the overlapping Allan deviation in the Rust core and fits angle / velocity
 random walk, bias instability and rate / acceleration random walk
 (:func:`triaxcal.noise_figures`). The sample rate comes from the ``t`` column (seconds) or
 ``--rate``. Readings are used in their own unit (raw counts by default); ``--cal`` applies a
 calibration file's matrix (the offset does not change an Allan deviation), ``--unit`` with
 ``--counts-per-unit`` divides counts by a nominal sensitivity. ``--format kalibr`` writes Kalibr's
-noise keys in SI units (rad/s, m/s^2), which needs readings in a unit that converts to them.
+noise keys in SI units (rad/s, m/s^2), which needs readings in a unit that converts to them;
+with ``-o NOISE.json`` it writes them as the JSON object ``triaxcal export --format kalibr
+--noise NOISE.json`` takes.
 """
 
 from __future__ import annotations
@@ -28,9 +31,11 @@ import numpy as np
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
+from ..io.logs import is_log, read_log
 from ..methods.allan import AllanAccumulator
-from ..methods.noise import NoiseFigures, kalibr_yaml, noise_figures, plot_allan
+from ..methods.noise import NoiseFigures, kalibr_noise, kalibr_yaml, noise_figures, plot_allan
 from ..units import UNITS
+from ._source import add_source_options
 from .fit import SENSOR_COLUMNS
 
 #: Rows parsed at a time.
@@ -68,8 +73,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--format", choices=("text", "json", "kalibr"), default="text",
                    help="text (default), json, or Kalibr's imu.yaml noise keys")
     p.add_argument("-o", "--output", default=None, metavar="FILE",
-                   help="write the output here instead of printing it")
+                   help="write the output here instead of printing it; with --format kalibr "
+                        "and a .json name, the JSON that triaxcal export --noise takes")
     p.add_argument("--rostopic", default="/imu0", help="rostopic for --format kalibr")
+    add_source_options(p)
     p.set_defaults(func=run)
 
 
@@ -168,7 +175,8 @@ def _per_sensor(text: str | None, sensor: str, what: str) -> str | None:
     return pairs.get(sensor)
 
 
-def _scale(args: argparse.Namespace, sensor: str) -> tuple[np.ndarray | None, float, str]:
+def _scale(args: argparse.Namespace, sensor: str, default_unit: str = "counts"
+           ) -> tuple[np.ndarray | None, float, str]:
     """(matrix to apply or None, divisor, unit of the result)."""
     unit = _per_sensor(args.unit, sensor, "--unit")
     cpu_text = _per_sensor(args.counts_per_unit, sensor, "--counts-per-unit")
@@ -191,15 +199,40 @@ def _scale(args: argparse.Namespace, sensor: str) -> tuple[np.ndarray | None, fl
         if not unit:
             raise CalibrationError("--counts-per-unit needs --unit (what the counts become)")
         div = cpu
-    unit = unit or "counts"
+    unit = unit or default_unit
     if unit != "counts" and unit not in UNITS:
         raise CalibrationError(f"--unit {unit!r}: use counts or one of {sorted(UNITS)}")
     return None, div, unit
 
 
+def _figures_from_log(args: argparse.Namespace, sensor: str) -> NoiseFigures:
+    path = Path(args.data)
+    if args.columns:
+        raise CalibrationError(f"--columns applies to tables; {path} is a log")
+    rec = read_log(path, instance=args.instance, topic=args.topic,
+                   undo_autopilot_cal=args.undo_autopilot_cal)
+    stream = rec.stream(sensor)
+    matrix, div, unit = _scale(args, sensor, default_unit=stream.unit)
+    rate = args.rate if args.rate is not None else stream.rate_hz
+    if not (math.isfinite(rate) and rate > 0):
+        raise CalibrationError(f"{path}: no sample rate for {sensor} (too few samples?): pass "
+                               "--rate HZ")
+    x = np.asarray(stream.data) / div
+    if matrix is not None:
+        x = x @ matrix.T
+    acc = AllanAccumulator(rate, axes=3, taus=args.taus, unit=unit)
+    acc.add(x)
+    return noise_figures(acc.result(), sensor=sensor)
+
+
 def figures_from_file(args: argparse.Namespace, sensor: str) -> NoiseFigures:
     """Stream the file once and fit the figures of one sensor."""
     path = Path(args.data)
+    if is_log(path) and path.exists():
+        return _figures_from_log(args, sensor)
+    if args.instance is not None or args.topic or args.undo_autopilot_cal:
+        raise CalibrationError("--instance, --topic and --undo-autopilot-cal apply to logs (.ulg, "
+                               f".bin, .bag, .db3, .mcap); {path} is read as a table")
     if not path.is_file():
         raise CalibrationError(f"{path} not found")
     names, delim, _ = _header(path)
@@ -246,7 +279,9 @@ def run(args: argparse.Namespace) -> int:
     if args.columns and len(sensors) > 1:
         raise CalibrationError("--columns picks one sensor's columns: use --sensor gyro or accel")
     figs = {s: figures_from_file(args, s) for s in sensors}
-    if args.format == "kalibr":
+    if args.format == "kalibr" and args.output and args.output.lower().endswith(".json"):
+        out = json.dumps(kalibr_noise(figs.get("gyro"), figs.get("accel")), indent=2) + "\n"
+    elif args.format == "kalibr":
         out = kalibr_yaml(figs.get("gyro"), figs.get("accel"), rostopic=args.rostopic)
     elif args.format == "json":
         out = json.dumps({s: f.to_dict() for s, f in figs.items()}, indent=2) + "\n"

@@ -129,6 +129,7 @@ class BootstrapIntervals:
                                                  self.tolerance)
             },
             "flagged": list(self.flagged),
+            "warnings": self.warnings(),
         }
 
     def warnings(self) -> list[str]:
