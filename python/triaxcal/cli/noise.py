@@ -5,15 +5,15 @@ noise figures of a sensor logged at rest.
 Reads a session CSV from ``triaxcal capture`` (header ``t,ax,ay,az,gx,gy,gz,...``) or any
 numeric table (``--columns`` picks three columns), chunk by chunk, so a 24-hour log never sits
 in memory, or an autopilot / ROS log (``.ulg``, ``.bin``, ``.bag``, ``.db3``, ``.mcap``: see
-``triaxcal fit``'s ``--instance``, ``--topic``, ``--undo-autopilot-cal``); computes the overlapping Allan deviation in the Rust core and fits angle / velocity
-random walk, bias instability and rate / acceleration random walk
-(:func:`triaxcal.noise_figures`). The sample rate comes from the ``t`` column (seconds) or
-``--rate``. Readings are used in their own unit (raw counts by default); ``--cal`` applies a
-calibration file's matrix (the offset does not change an Allan deviation), ``--unit`` with
-``--counts-per-unit`` divides counts by a nominal sensitivity. ``--format kalibr`` writes Kalibr's
-noise keys in SI units (rad/s, m/s^2), which needs readings in a unit that converts to them;
-with ``-o NOISE.json`` it writes them as the JSON object ``triaxcal export --format kalibr
---noise NOISE.json`` takes.
+``triaxcal fit``'s ``--instance``, ``--topic``, ``--undo-autopilot-cal``); computes the
+overlapping Allan deviation in the Rust core and fits angle / velocity random walk, bias
+instability and rate / acceleration random walk (:func:`triaxcal.noise_figures`). The sample
+rate comes from the ``t`` column (seconds) or ``--rate``. Readings are used in their own unit
+(raw counts by default); ``--cal`` applies a calibration file's matrix (the offset does not
+change an Allan deviation), ``--unit`` with ``--counts-per-unit`` divides counts by a nominal
+sensitivity. ``--format kalibr`` writes Kalibr's noise keys in SI units (rad/s, m/s^2), which
+needs readings in a unit that converts to them; with ``-o NOISE.json`` it writes them as the
+JSON object ``triaxcal export --format kalibr --noise NOISE.json`` takes.
 """
 
 from __future__ import annotations

@@ -2,19 +2,19 @@
 
 Error model (the fits', :mod:`triaxcal.fit`): ``calibrated = (raw - offset) @ matrix.T``; the
 coefficients are ``offset_x..z`` (raw units), ``diag_x..z`` and ``offdiag_xy, xz, yz``
-(calibrated units per raw unit; the matrix **multiplies**), or ``data_radius`` (raw units)
-for the sphere model -- the names of :attr:`triaxcal.EllipsoidFit.param_names`.
+(calibrated units per raw unit; the matrix **multiplies**), or ``data_radius`` (raw units) for
+the sphere model -- the names of :attr:`triaxcal.EllipsoidFit.param_names`.
 
-The fit's standard errors are asymptotic: they come from the curvature of the sum of squares
-at the solution and assume many readings spread evenly with small, independent noise. The
+The fit's standard errors are asymptotic: they come from the curvature of the sum of squares at
+the solution and assume many readings spread evenly with small, independent noise. The
 bootstrap asks the data instead: draw the readings (or whole poses, ``groups``) with
 replacement, refit, many times (in one call of the parallel batch engine,
-:func:`triaxcal.fit_batch`), and read the spread of the refits. The interval is the
-percentile interval of the refits (at ``level``, default 95 %), widened about the estimate by
-``sqrt(N / (N - P))`` for the ``P`` coefficients fitted to ``N`` readings (or poses), with a
-fixed seed so that the same data give the same interval. A coefficient is *flagged* when half its interval exceeds
-what firmware needs: by default 1 % of the radius in raw units for an offset, 1 % of the mean
-gain for a gain or cross-axis term.
+:func:`triaxcal.fit_batch`), and read the spread of the refits. The interval is the percentile
+interval of the refits (at ``level``, default 95 %), widened about the estimate by ``sqrt(N /
+(N - P))`` for the ``P`` coefficients fitted to ``N`` readings (or poses), with a fixed seed so
+that the same data give the same interval. A coefficient is *flagged* when half its interval
+exceeds what firmware needs: by default 1 % of the radius in raw units for an offset, 1 % of
+the mean gain for a gain or cross-axis term.
 """
 
 from __future__ import annotations
