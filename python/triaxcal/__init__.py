@@ -47,6 +47,7 @@ from .fit import (
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
 from .methods.allan import AllanAccumulator, AllanDeviation, allan
+from .methods.bootstrap import BootstrapIntervals, bootstrap
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -80,8 +81,10 @@ __all__ = [
     "AllanAccumulator",
     "AllanDeviation",
     "AxisNoise",
+    "BootstrapIntervals",
     "NoiseFigures",
     "allan",
+    "bootstrap",
     "kalibr_noise",
     "noise_figures",
     "plot_allan",

@@ -8,11 +8,13 @@
 * :mod:`~triaxcal.methods.static` -- methods that need no fit: tilt rig, six-position
   min/max, Ferraris closed form.
 * :mod:`~triaxcal.methods.allan` -- overlapping Allan deviation, streamed through the Rust core.
+* :mod:`~triaxcal.methods.bootstrap` -- bootstrap confidence intervals of fit coefficients.
 * :mod:`~triaxcal.methods.noise` -- noise figures (random walks, bias instability) and Kalibr's
   noise keys.
 """
 
 from .allan import AllanAccumulator, AllanDeviation, allan
+from .bootstrap import BootstrapIntervals, bootstrap
 from .gyro import (
     GyroBias,
     GyroGains,
@@ -39,8 +41,10 @@ __all__ = [
     "AllanAccumulator",
     "AllanDeviation",
     "AxisNoise",
+    "BootstrapIntervals",
     "NoiseFigures",
     "allan",
+    "bootstrap",
     "kalibr_noise",
     "noise_figures",
     "plot_allan",
