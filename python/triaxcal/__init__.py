@@ -7,6 +7,7 @@ Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multi
 from . import sim
 from ._core import __version__
 from .calibration import Calibration, SensorCalibration, TemperatureTerms
+from .compare import CalibrationDiff, compare
 from .detect import (
     Pose,
     PoseDetection,
@@ -82,9 +83,11 @@ __all__ = [
     "AllanDeviation",
     "AxisNoise",
     "BootstrapIntervals",
+    "CalibrationDiff",
     "NoiseFigures",
     "allan",
     "bootstrap",
+    "compare",
     "kalibr_noise",
     "noise_figures",
     "plot_allan",

@@ -14,6 +14,10 @@ The JSON file (``"schema": "triaxcal.calibration/1"``) keeps the autopilots' par
 ``offset``, ``diag``, ``offdiag`` (``[xy, xz, yz]``, the upper triangle; a non-symmetric matrix
 adds ``offdiag_lower`` ``[yx, zx, zy]``) and ``radius``. Floats are written with ``repr`` (the
 shortest text that reads back to the same double), so ``load(save(cal)) == cal`` exactly.
+
+A part that replaced an earlier calibration of the same sensor keeps a ``previous`` list of
+summaries (newest first, at most :data:`MAX_PREVIOUS`): when it was replaced, the coefficients,
+units, standard errors and provenance -- enough for ``triaxcal diff`` to say what changed.
 """
 
 from __future__ import annotations
@@ -47,6 +51,12 @@ SCHEMA_NAME = "triaxcal.calibration"
 SCHEMA_VERSION = 1
 SCHEMA = f"{SCHEMA_NAME}/{SCHEMA_VERSION}"
 SENSORS = ("accel", "gyro", "mag")
+
+#: Most summaries of replaced calibrations a part keeps (newest first).
+MAX_PREVIOUS = 10
+_SUMMARY_REQUIRED = {"replaced_utc", "raw_unit", "unit", "offset", "diag", "offdiag"}
+_SUMMARY_OPTIONAL = {"created_utc", "offdiag_lower", "radius", "model", "stderr", "rms", "n",
+                     "input_sha256", "source"}
 
 _AXES = ("x", "y", "z")
 _UPPER = ((0, 1), (0, 2), (1, 2))  # xy, xz, yz
@@ -139,6 +149,53 @@ def _keys(d: Mapping[str, Any], required: set[str], optional: set[str], what: st
             f"{what} has unknown field(s) {sorted(unknown)}; put free-form metadata under "
             "the top-level 'extra' object"
         )
+
+
+def _summary(d: Any, what: str) -> dict[str, Any]:
+    """A validated, plain-JSON copy of one ``previous`` summary (see the module docstring)."""
+    _keys(d, _SUMMARY_REQUIRED, _SUMMARY_OPTIONAL, what)
+    out: dict[str, Any] = {}
+    for k in ("replaced_utc", "created_utc", "raw_unit", "unit"):
+        if k in d:
+            if not isinstance(d[k], str):
+                raise CalibrationError(f"{what}.{k} must be a string, got {d[k]!r}")
+            out[k] = d[k]
+    for k in ("model", "input_sha256", "source"):
+        if d.get(k) is not None and not isinstance(d[k], str):
+            raise CalibrationError(f"{what}.{k} must be a string or null, got {d[k]!r}")
+        if k in d:
+            out[k] = d[k]
+    for k in ("offset", "diag", "offdiag", "offdiag_lower"):
+        if d.get(k) is not None:
+            out[k] = _array(d[k], (3,), f"{what}.{k}").tolist()
+    if d.get("radius") is not None:
+        r = _float(d["radius"], f"{what}.radius")
+        if r <= 0:
+            raise CalibrationError(f"{what}.radius must be greater than zero, got {r}")
+        out["radius"] = r
+    elif "radius" in d:
+        out["radius"] = None
+    if "rms" in d:
+        rms = _float(d["rms"], f"{what}.rms")
+        if rms < 0:
+            raise CalibrationError(f"{what}.rms must be >= 0, got {rms}")
+        out["rms"] = rms
+    if "n" in d:
+        if isinstance(d["n"], bool) or not isinstance(d["n"], int) or d["n"] < 0:
+            raise CalibrationError(f"{what}.n must be a whole number >= 0, got {d['n']!r}")
+        out["n"] = int(d["n"])
+    if "stderr" in d:
+        se = d["stderr"]
+        if not isinstance(se, Mapping):
+            raise CalibrationError(f"{what}.stderr must be an object of name: number")
+        clean = {}
+        for k, v in se.items():
+            f = _float(v, f"{what}.stderr.{k}")
+            if f < 0:
+                raise CalibrationError(f"{what}.stderr.{k} must be >= 0, got {f}")
+            clean[str(k)] = f
+        out["stderr"] = clean
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -247,6 +304,9 @@ class SensorCalibration:
         SHA-256 of the input data (see :func:`sha256_points`), for provenance.
     source : str, optional
         Where the data came from (a file name), for provenance.
+    previous : tuple of dict
+        Summaries of the calibrations of this sensor that this one replaced, newest first (see
+        :meth:`with_previous`).
     """
 
     offset: np.ndarray
@@ -259,6 +319,7 @@ class SensorCalibration:
     stats: dict[str, Any] = field(default_factory=dict)
     input_sha256: str | None = None
     source: str | None = None
+    previous: tuple[dict[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "offset", _array(self.offset, (3,), "offset"))
@@ -281,6 +342,14 @@ class SensorCalibration:
             v = getattr(self, name)
             if v is not None and not isinstance(v, str):
                 raise CalibrationError(f"{name} must be a string or None, got {v!r}")
+        prev = self.previous
+        if isinstance(prev, (str, bytes, Mapping)) or not isinstance(prev, (list, tuple)):
+            raise CalibrationError("previous must be a list of summaries (newest first)")
+        if len(prev) > 10 * MAX_PREVIOUS:
+            raise CalibrationError(f"previous holds {len(prev)} summaries; at most "
+                                   f"{MAX_PREVIOUS} are kept")
+        object.__setattr__(self, "previous", tuple(
+            _summary(p, f"previous[{i}]") for i, p in enumerate(prev)))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod
@@ -483,6 +552,63 @@ class SensorCalibration:
         """Whether ``matrix`` is exactly symmetric (as every ellipsoid fit returns)."""
         return all(self.matrix[i, j] == self.matrix[j, i] for i, j in _UPPER)
 
+    # -- history --------------------------------------------------------------------------
+    def summary(self, *, replaced_utc: str | None = None, created_utc: str = "") -> dict[str, Any]:
+        """What ``previous`` keeps of this part once it is replaced: coefficients, units,
+        standard errors, residual RMS and provenance (no temperature terms, no history)."""
+        d: dict[str, Any] = {
+            "replaced_utc": replaced_utc or _now_utc(),
+            "created_utc": created_utc,
+            "raw_unit": self.raw_unit,
+            "unit": self.unit,
+            "offset": self.offset.tolist(),
+            "diag": self.diag.tolist(),
+            "offdiag": self.offdiag.tolist(),
+        }
+        if not self.symmetric:
+            d["offdiag_lower"] = [float(self.matrix[i, j]) for i, j in _LOWER]
+        d["radius"] = self.radius
+        d["model"] = self.model
+        for k in ("stderr", "rms", "n"):
+            if k in self.stats:
+                d[k] = self.stats[k]
+        d["input_sha256"] = self.input_sha256
+        d["source"] = self.source
+        return _summary(d, "summary")
+
+    def with_previous(self, old: SensorCalibration, *, created_utc: str = "",
+                      replaced_utc: str | None = None) -> SensorCalibration:
+        """This part, remembering that it replaced ``old`` (whose file was created at
+        ``created_utc``): ``old``'s summary, then ``old``'s own history, newest first, at most
+        :data:`MAX_PREVIOUS`."""
+        hist = (old.summary(replaced_utc=replaced_utc, created_utc=created_utc),
+                *old.previous)
+        fields = {k: getattr(self, k) for k in ("offset", "matrix", "raw_unit", "unit",
+                                                "radius", "model", "temperature", "stats",
+                                                "input_sha256", "source")}
+        return SensorCalibration(**fields, previous=hist[:MAX_PREVIOUS])
+
+    def previous_part(self, index: int = 0) -> SensorCalibration:
+        """The replaced calibration ``previous[index]`` as a part (its standard errors, RMS and
+        reading count in ``stats``), e.g. to compare with this one."""
+        if not 0 <= index < len(self.previous):
+            raise CalibrationError(
+                f"this part keeps {len(self.previous)} earlier calibration(s); no "
+                f"previous[{index}]"
+            )
+        p = self.previous[index]
+        m = np.diag(p["diag"])
+        lower = p.get("offdiag_lower") or p["offdiag"]
+        for k, (i, j) in enumerate(_UPPER):
+            m[i, j] = p["offdiag"][k]
+            m[j, i] = lower[k]
+        return SensorCalibration(
+            offset=p["offset"], matrix=m, raw_unit=p["raw_unit"], unit=p["unit"],
+            radius=p.get("radius"), model=p.get("model"),
+            stats={k: p[k] for k in ("stderr", "rms", "n") if k in p},
+            input_sha256=p.get("input_sha256"), source=p.get("source"),
+        )
+
     # -- JSON -----------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form (the ``parts.<sensor>`` object of the file)."""
@@ -501,6 +627,8 @@ class SensorCalibration:
         d["input_sha256"] = self.input_sha256
         d["source"] = self.source
         d["stats"] = self.stats
+        if self.previous:
+            d["previous"] = [dict(p) for p in self.previous]
         return d
 
     @classmethod
@@ -509,7 +637,8 @@ class SensorCalibration:
         _keys(
             d,
             {"raw_unit", "unit", "offset", "diag", "offdiag"},
-            {"offdiag_lower", "radius", "model", "temperature", "input_sha256", "source", "stats"},
+            {"offdiag_lower", "radius", "model", "temperature", "input_sha256", "source", "stats",
+             "previous"},
             what,
         )
         diag = _array(d["diag"], (3,), f"{what}.diag")
@@ -537,6 +666,7 @@ class SensorCalibration:
                 stats=dict(stats),
                 input_sha256=d.get("input_sha256"),
                 source=d.get("source"),
+                previous=d.get("previous") or (),
             )
         except CalibrationError as exc:
             raise CalibrationError(f"{what}: {exc}") from None

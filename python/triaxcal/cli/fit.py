@@ -323,7 +323,7 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
 def _fields(part: SensorCalibration) -> dict[str, Any]:
     return {k: getattr(part, k) for k in ("offset", "matrix", "raw_unit", "unit", "radius",
                                           "model", "temperature", "stats", "input_sha256",
-                                          "source")}
+                                          "source", "previous")}
 
 
 def register(subparsers: Any) -> None:
@@ -339,7 +339,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("-o", "--output", required=True, metavar="CAL.json",
                    help="calibration file to write; an existing one keeps its other sensors")
     p.add_argument("--new", action="store_true",
-                   help="overwrite CAL.json instead of adding this sensor to it")
+                   help="overwrite CAL.json instead of adding this sensor to it (the replaced "
+                        "calibration of this sensor is still kept in its 'previous' summary)")
     p.add_argument("--sensor-id", default=None, help="board / sensor id to record")
     p.set_defaults(func=run)
 
@@ -355,6 +356,15 @@ def run(args: argparse.Namespace) -> int:
             raise CalibrationError(
                 f"{path} exists but is not a calibration file ({exc}); pass --new to replace it"
             ) from None
+    # the calibration this one replaces is not lost: its summary goes into `previous`
+    old = cal
+    if old is None and path.exists():
+        try:
+            old = Calibration.load(path)
+        except CalibrationError:
+            old = None  # --new over a file that is not a calibration: nothing to keep
+    if old is not None and getattr(old, out.sensor) is not None:
+        out.part = out.part.with_previous(old.part(out.sensor), created_utc=old.created_utc)
     if cal is None:
         parts: dict[str, Any] = {out.sensor: out.part}
         cal = Calibration(**parts, sensor_id=args.sensor_id or "")
