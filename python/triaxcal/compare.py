@@ -313,7 +313,8 @@ def compare(
           "max_offset_change": float(max_offset_change)}
     notes: list[str] = []
     if isinstance(old, SensorCalibration) and isinstance(new, SensorCalibration):
-        parts = (compare_parts(old, new, sensor=sensors[0] if sensors else "sensor", **kw),)
+        parts: tuple[PartDiff, ...] = (
+            compare_parts(old, new, sensor=sensors[0] if sensors else "sensor", **kw),)
     elif isinstance(old, Calibration) and isinstance(new, Calibration):
         if old.sensor_id and new.sensor_id and old.sensor_id != new.sensor_id:
             notes.append(f"the sensor ids differ ({old.sensor_id!r} -> {new.sensor_id!r}): "
