@@ -370,3 +370,18 @@ def test_cli_writes_the_json_that_export_takes(still_session, tmp_path, capsys):
 
     text = kalibr_imu_yaml(None, topic="/imu0", rate_hz=50.0, model="calibrated", noise=noise)
     assert f"gyroscope_noise_density: {noise['gyroscope_noise_density']!r}" in text
+
+
+def test_readme_noise_example_runs(capsys):
+    import re
+
+    from conftest import readme_section
+
+    code = re.findall(r"```python\n(.*?)```", readme_section("Noise figures"), re.S)[0]
+    ns: dict = {}
+    exec(compile(code, "README noise example", "exec"), ns)
+    out = capsys.readouterr().out
+    assert "angle random walk" in out and "gyroscope_noise_density" in out
+    assert ns["acc"].n == 1_000_000
+    for a in ns["nf"].axes:
+        assert abs(a.white / 0.005 - 1) < 0.05
