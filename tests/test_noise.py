@@ -385,3 +385,24 @@ def test_readme_noise_example_runs(capsys):
     assert ns["acc"].n == 1_000_000
     for a in ns["nf"].axes:
         assert abs(a.white / 0.005 - 1) < 0.05
+
+
+def test_cli_reads_a_table_in_chunks_without_changing_the_result(still_session, monkeypatch,
+                                                                  capsys):
+    import json as _json
+
+    import triaxcal.cli.noise as cli_noise
+
+    args = ["noise", str(still_session), "--format", "json", "--taus", "octave", "--rate", "50"]
+    assert main(args) == 0
+    whole = _json.loads(capsys.readouterr().out)
+    monkeypatch.setattr(cli_noise, "CHUNK_ROWS", 7_777)  # 16 chunks with a ragged tail
+    sizes = [len(c) for c, _ in cli_noise.read_chunks(still_session, [4, 5, 6])]
+    assert len(sizes) == 16 and sum(sizes) == 120_000
+    assert main(args) == 0
+    chunked = _json.loads(capsys.readouterr().out)
+    assert chunked == whole
+    data = np.loadtxt(still_session, delimiter=",", skiprows=1)
+    ad = tc.allan(data[:, 4:7], 50.0, taus="octave", exact_up_to=65536)
+    fig = tc.noise_figures(ad, sensor="gyro")
+    assert whole["gyro"]["axes"]["x"]["white"] == pytest.approx(fig.axes[0].white, rel=1e-12)

@@ -103,9 +103,10 @@ def _header(path: Path) -> tuple[tuple[str, ...] | None, str | None, int]:
     raise CalibrationError(f"{path} holds no data rows")
 
 
-def read_chunks(path: Path, cols: list[int], *, chunk_rows: int = CHUNK_ROWS,
+def read_chunks(path: Path, cols: list[int], *, chunk_rows: int | None = None,
                 time_col: int | None = None) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
-    """Yield (readings (rows, len(cols)), times or None) chunk by chunk."""
+    """Yield (readings (rows, len(cols)), times or None) chunk by chunk (``CHUNK_ROWS``)."""
+    rows = int(chunk_rows or CHUNK_ROWS)
     _, delim, skip = _header(path)
     want = list(cols) + ([time_col] if time_col is not None else [])
     with open(path, encoding="utf-8", errors="replace") as f:
@@ -120,7 +121,7 @@ def read_chunks(path: Path, cols: list[int], *, chunk_rows: int = CHUNK_ROWS,
                 s = line.strip()
                 if s and not s.startswith("#"):
                     lines.append(s)
-                    if len(lines) >= chunk_rows:
+                    if len(lines) >= rows:
                         break
             if not lines:
                 return
