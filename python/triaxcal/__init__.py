@@ -26,6 +26,7 @@ from .export import (
     c_header,
     decode_motioncal,
     encode_motioncal,
+    js_module,
     kalibr_imu_yaml,
     motioncal_packet,
     px4_params_file,
@@ -75,6 +76,14 @@ from .methods.static import (
     tilt_rig,
 )
 from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .parts import (
+    fold_asa,
+    part_from_center,
+    part_from_gyro_gains,
+    part_from_temperature,
+    part_from_tilt_rig,
+)
+from .poses import PoseSettings, session_poses
 from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
@@ -91,6 +100,14 @@ __all__ = [
     "kalibr_noise",
     "noise_figures",
     "plot_allan",
+    "PoseSettings",
+    "session_poses",
+    "fold_asa",
+    "part_from_center",
+    "part_from_gyro_gains",
+    "part_from_temperature",
+    "part_from_tilt_rig",
+    "js_module",
     "LogRecording",
     "Stream",
     "adafruit_calib_json",

@@ -12,7 +12,8 @@ from .. import __version__
 from ..errors import CalibrationError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("demo", "capture", "fit", "export", "report", "send", "noise", "diff")
+COMMANDS = ("demo", "capture", "fit", "export", "report", "send", "sphere_center", "tilt_rig",
+            "gyro_gains", "temperature", "noise", "diff")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -7,7 +7,8 @@ or a log: PX4 ``.ulg``, ArduPilot ``.bin``, ROS ``.bag`` / ``.db3`` / ``.mcap`` 
 ``--topic``, ``--undo-autopilot-cal``; the raw unit is the log's).
 ``--columns`` picks three columns by name or zero-based index (``ax,ay,az`` or ``0,1,2``);
 by default the sensor's named columns, or the first three of a headerless file. ``--poses``
-first reduces a raw time series to still-pose means (:func:`triaxcal.detect.detect_poses`).
+first reduces a raw time series to still-pose means, a pose ending when any sensor says the
+board moved, exactly as ``triaxcal capture`` counted them (:func:`triaxcal.poses.session_poses`).
 Outliers are rejected by the iterated 2-sigma rule on vector lengths (``--sigma 0`` disables).
 """
 
@@ -24,8 +25,13 @@ from typing import Any
 import numpy as np
 
 from ..calibration import SENSORS, Calibration, SensorCalibration
+from ..coverage import coverage, coverage_warning
 from ..errors import CalibrationError
 from ..fit import MODELS
+from ..io.akm import apply_asa, asa_factors
+from ..parts import fold_asa
+from ..poses import PoseSettings, sensor_columns, session_poses
+from ._poses import add_pose_options
 from ._source import Source, add_source_options, autopilot_lines, autopilot_stats, load_source
 
 #: Default column names per sensor (the device channel order,
@@ -200,6 +206,19 @@ def pick_columns(table: Table, spec: str | None, sensor: str) -> list[int]:
 # The fit pipeline, shared with `triaxcal report`
 
 
+def _asa(text: str) -> tuple[int, int, int]:
+    parts = [s.strip() for s in text.split(",")]
+    try:
+        vals = tuple(int(s, 0) for s in parts)
+        asa_factors(vals)
+    except (ValueError, CalibrationError):
+        raise argparse.ArgumentTypeError(
+            f"--asa {text!r}: give the three fuse-ROM bytes, e.g. 176,177,165 (0..255, "
+            "decimal or 0x..)"
+        ) from None
+    return vals  # type: ignore[return-value]
+
+
 def add_fit_options(p: argparse.ArgumentParser) -> None:
     """The options of ``fit`` that ``report`` also takes for a session file."""
     p.add_argument("--sensor", choices=SENSORS, default=None,
@@ -227,13 +246,15 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "(exactly Magneto's rule)")
     p.add_argument("--poses", action="store_true",
                    help="reduce a raw time series (a capture session) to still-pose means first")
-    p.add_argument("--window", type=int, default=25, help="pose detection window (samples)")
-    p.add_argument("--units-per-g", type=float, default=16384.0,
-                   help="accelerometer counts per g, for --poses (16384 at +-2 g)")
+    p.add_argument("--asa", type=_asa, default=None, metavar="X,Y,Z",
+                   help="magnetometer: the fuse-ROM sensitivity bytes ASAX,ASAY,ASAZ of an "
+                        "AK8963 (AK8975, AK09911, AK09912), applied before fitting as "
+                        "k = (ASA - 128) / 256 + 1; the part still takes the register counts")
     p.add_argument("--bootstrap", type=int, default=0, metavar="N",
                    help="also compute 95 %% bootstrap intervals of every coefficient from N "
                         "refits (e.g. 1000, fixed seed), stored in the calibration, shown by "
                         "report and used by diff")
+    add_pose_options(p)
     add_source_options(p)
 
 
@@ -250,19 +271,24 @@ class FitOutcome:
     source: Source | None = None
 
 
-def _pose_points(table: Table, cols: list[int], args: argparse.Namespace) -> np.ndarray:
-    from ..detect import detect_poses
-
-    names = table.names or ()
-    acc = [names.index(c) for c in SENSOR_COLUMNS["accel"]] if all(
-        c in names for c in SENSOR_COLUMNS["accel"]) else cols
-    det = detect_poses(table.data, window=args.window, units_per_g=args.units_per_g, columns=acc)
+def pose_points(
+    table: Table, cols: list[int], settings: PoseSettings
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Still-pose means of columns ``cols``, and the statistics that say how they were found
+    (``poses``, ``n_poses``, ``pose_detection``: the settings with the values the data
+    decided, so that ``report`` finds the same poses again)."""
+    accel = None if "accel" in sensor_columns(table.names) else cols
+    det, how = session_poses(table.names, table.data, settings, accel=accel)
     if len(det.poses) == 0:
         raise CalibrationError(
-            f"no still poses found in {table.path} (window {args.window} samples): hold the "
+            f"no still poses found in {table.path} (window {settings.window} samples): hold the "
             "board still for a second in each pose, or drop --poses for point-per-row data"
         )
-    return np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
+    pts = np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
+    stats = {"poses": True, "n_poses": len(det.poses),
+             "pose_detection": settings.with_resolved(how).to_dict(),
+             "pose_sensors": list(how.sensors)}
+    return pts, stats
 
 
 def fit_file(args: argparse.Namespace) -> FitOutcome:
@@ -283,7 +309,13 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         unit = args.unit
     if args.rounds < 0:
         raise CalibrationError("--rounds must be >= 0")
-    rob = fit_robust(pts, model=args.model, radius=radius, sigma=args.sigma,
+    fitted = pts
+    if getattr(args, "asa", None) is not None:
+        if sensor != "mag":
+            raise CalibrationError("--asa is the magnetometer's sensitivity adjustment: use it "
+                                   "with --sensor mag")
+        fitted = apply_asa(pts, args.asa)  # adjusted before fitting, folded back below
+    rob = fit_robust(fitted, model=args.model, radius=radius, sigma=args.sigma,
                      max_rounds=args.rounds, lengths=args.reject_on)
     extra: dict[str, Any] = {
         "columns": src.columns,
@@ -292,26 +324,30 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         "sigma": float(args.sigma),
         "rejection_rounds": int(rob.rounds),
     }
-    if args.poses:
-        extra["pose_window"] = int(args.window)
-        extra["units_per_g"] = float(args.units_per_g)
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
     extra.update(src.extra)
     extra.update(autopilot_stats(src, sensor))
-    from ..report import coverage
-
     part = SensorCalibration.from_fit(
-        rob.fit, raw_unit=raw_unit, unit=unit, points=pts[rob.inliers],
+        rob.fit, raw_unit=raw_unit, unit=unit, points=fitted[rob.inliers],
         rejected=rob.rejected, input_sha256=src.sha256, source=str(src.path),
         extra_stats=extra,
     )
+    if fitted is not pts:  # the part takes the register counts the chip reports
+        part = fold_asa(part, args.asa)
     stats = dict(part.stats)
-    stats["coverage_pct"] = coverage(part.apply(pts[rob.inliers]))[1]
+    cov = coverage(part.apply(pts))  # of the session: every reading, outliers too
+    stats["coverage_pct"] = cov.percent
+    low = coverage_warning(cov, sensor)
+    if low:
+        stats["warnings"] = [*stats.get("warnings", []), low]
     if getattr(args, "bootstrap", 0):
         from ..methods.bootstrap import bootstrap
 
-        ci = bootstrap(pts[rob.inliers], fit=rob.fit, radius=radius, n_boot=args.bootstrap,
+        if fitted is not pts:
+            raise CalibrationError("--bootstrap with --asa is not supported: the intervals "
+                                   "would describe the ASA-adjusted coefficients")
+        ci = bootstrap(fitted[rob.inliers], fit=rob.fit, radius=radius, n_boot=args.bootstrap,
                        raw_unit=raw_unit, unit=unit)
         stats["intervals"] = ci.as_dict()
         stats["warnings"] = list(stats.get("warnings", [])) + ci.warnings()

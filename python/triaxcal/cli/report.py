@@ -18,8 +18,11 @@ from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..io.logs import is_log
 from ..report import QualityReport, plot_report, quality_report
+from ._calfile import file_sha256
+from ._method_parts import summary_only, summary_text, tilt_points
+from ._poses import apply_settings, stored_settings
 from ._source import load_source
-from .fit import add_fit_options, fit_file, pick_columns, read_table
+from .fit import add_fit_options, fit_file, pick_columns, pose_points, read_table
 
 
 def register(subparsers: Any) -> None:
@@ -93,7 +96,8 @@ def _log_report(src: Path, part: SensorCalibration, sensor: str,
         same.topic = list(log["topic"])
     same.undo_autopilot_cal = args.undo_autopilot_cal or bool(log.get("undo_autopilot_cal"))
     same.poses = bool(part.stats.get("poses")) or args.poses
-    same.window = int(part.stats.get("pose_window", args.window))
+    if part.stats.get("poses"):  # the poses it was fitted on, found with its stored settings
+        apply_settings(same, stored_settings(part.stats))
     data = load_source(src, sensor, same)
     if args.data_file is None and part.input_sha256 not in (None, data.sha256):
         raise CalibrationError(
@@ -133,6 +137,9 @@ def run(args: argparse.Namespace) -> int:
                     print(f"  (no figure for {sensor}: its data file {part.source!r} was not "
                           "found; pass --data FILE)", file=sys.stderr)
                 continue
+            if summary_only(part):  # gyro gains, temperature terms, a bias: not a sphere
+                print(summary_text(sensor, part))
+                continue
             if is_log(src):
                 rep, log_pts = _log_report(src, part, sensor, args)
                 reports[sensor] = rep
@@ -142,23 +149,24 @@ def run(args: argparse.Namespace) -> int:
                                       _plot_path(args.plot, sensor, len(sensors) > 1), report=rep)
                     print(f"  figure: {out}")
                 continue
-            table = read_table(src)
-            if args.data_file is None and part.input_sha256 not in (None, table.sha256):
+            if part.stats.get("method") == "tilt-rig":
+                pts, sha = tilt_points(src, part), file_sha256(src)
+            else:
+                table = read_table(src)
+                sha = table.sha256
+                cols_spec = args.columns or ",".join(
+                    str(c) for c in part.stats.get("columns", []))
+                cols = pick_columns(table, cols_spec or None, sensor)
+                pts = table.data[:, cols]
+                if part.stats.get("poses"):
+                    # the poses the part was fitted on, found again with its stored settings
+                    pts, _ = pose_points(table, cols, stored_settings(part.stats))
+            if args.data_file is None and part.input_sha256 not in (None, sha):
                 raise CalibrationError(
                     f"{src} has changed since the calibration was made (SHA-256 differs): pass "
                     "--data FILE explicitly to judge the calibration on it anyway"
                 )
-            cols_spec = args.columns or ",".join(str(c) for c in part.stats.get("columns", []))
-            cols = pick_columns(table, cols_spec or None, sensor)
-            pts = table.data[:, cols]
-            if part.stats.get("poses"):
-                from .fit import _pose_points
-
-                same = argparse.Namespace(**vars(args))
-                same.window = int(part.stats.get("pose_window", args.window))
-                same.units_per_g = float(part.stats.get("units_per_g", args.units_per_g))
-                pts = _pose_points(table, cols, same)
-            rej = part.stats.get("rejected") if table.sha256 == part.input_sha256 else None
+            rej = part.stats.get("rejected") if sha == part.input_sha256 else None
             if rej is not None and (not rej or max(rej) < len(pts)):
                 rep = quality_report(pts, part, sensor=sensor, rejected=rej)
             else:

@@ -9,6 +9,8 @@ One module per target format:
   (Q7.24 matrix, int64 accumulation), and :func:`apply_fixed`, its bit-exact Python model.
 * :mod:`~triaxcal.export.motioncal` -- :func:`motioncal_packet`, the 68-byte PJRC MotionCal
   packet that Adafruit_Sensor_Calibration sketches accept.
+* :mod:`~triaxcal.export.js` -- :func:`js_module`, a JavaScript module with the coefficients and
+  ``apply``: an ES module (``js``) or plain ECMAScript 5.1 for Espruino (``js-espruino``).
 * :mod:`~triaxcal.export.ardupilot` -- :func:`ardupilot_parm`, ArduPilot ``COMPASS_*``,
   ``INS_ACC*``, ``INS_GYR*``, ``INS_TCALn_*`` parameters (``.parm``).
 * :mod:`~triaxcal.export.px4` -- :func:`px4_params_file`, PX4 ``CAL_*`` and ``TC_*``
@@ -45,6 +47,7 @@ from .adafruit import adafruit_calib, adafruit_calib_json
 from .ardupilot import ardupilot_params, ardupilot_parm
 from .c import c_header
 from .c_fixed import FixedPoint, apply_fixed, c_fixed_header, fixed_point
+from .js import js_module
 from .kalibr import KALIBR_MODELS, KALIBR_NOISE_KEYS, kalibr_imu_yaml, kalibr_intrinsics
 from .motioncal import motioncal_packet
 from .px4 import px4_params, px4_params_file
@@ -73,13 +76,15 @@ __all__ = [
     "encode_motioncal",
     "export",
     "fixed_point",
+    "js_module",
     "motioncal_packet",
     "parse_motioncal_echo",
     "unit_factor",
     "write_outputs",
 ]
 
-EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal", "ardupilot", "px4", "kalibr", "adafruit")
+EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal", "ardupilot", "px4", "kalibr", "adafruit",
+                  "js", "js-espruino")
 
 
 def export(
@@ -112,6 +117,9 @@ def export(
         p.write_text(cal.to_json(), encoding="utf-8")
     elif fmt == "motioncal":
         p.write_bytes(motioncal_packet(cal, counts_per_unit=counts_per_unit))
+    elif fmt in ("js", "js-espruino"):
+        form = "esm" if fmt == "js" else "espruino"
+        p.write_text(js_module(cal, prefix=prefix, form=form), encoding="utf-8")
     elif fmt in _PARAM_WRITERS:
         text = _PARAM_WRITERS[fmt](cal, counts_per_unit=counts_per_unit, **options)
         p.write_text(text, encoding="utf-8")
