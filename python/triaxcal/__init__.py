@@ -7,6 +7,7 @@ Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multi
 from . import sim
 from ._core import __version__
 from .calibration import Calibration, SensorCalibration, TemperatureTerms
+from .compare import CalibrationDiff, compare
 from .detect import (
     Pose,
     PoseDetection,
@@ -48,6 +49,8 @@ from .fit import (
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
 from .io.tables import Table, read_table
+from .methods.allan import AllanAccumulator, AllanDeviation, allan
+from .methods.bootstrap import BootstrapIntervals, bootstrap
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -64,6 +67,7 @@ from .methods.imu import (
     TriadCalibration,
     calibrate_imu,
 )
+from .methods.noise import AxisNoise, NoiseFigures, kalibr_noise, noise_figures, plot_allan
 from .methods.static import (
     FerrarisCalibration,
     SixPosition,
@@ -85,6 +89,18 @@ from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "AllanAccumulator",
+    "AllanDeviation",
+    "AxisNoise",
+    "BootstrapIntervals",
+    "CalibrationDiff",
+    "NoiseFigures",
+    "allan",
+    "bootstrap",
+    "compare",
+    "kalibr_noise",
+    "noise_figures",
+    "plot_allan",
     "PoseSettings",
     "session_poses",
     "fold_asa",

@@ -14,6 +14,10 @@ The JSON file (``"schema": "triaxcal.calibration/1"``) keeps the autopilots' par
 ``offset``, ``diag``, ``offdiag`` (``[xy, xz, yz]``, the upper triangle; a non-symmetric matrix
 adds ``offdiag_lower`` ``[yx, zx, zy]``) and ``radius``. Floats are written with ``repr`` (the
 shortest text that reads back to the same double), so ``load(save(cal)) == cal`` exactly.
+
+A part that replaced an earlier calibration of the same sensor keeps a ``previous`` list of
+summaries (newest first, at most :data:`MAX_PREVIOUS`): when it was replaced, the coefficients,
+units, standard errors and provenance -- enough for ``triaxcal diff`` to say what changed.
 """
 
 from __future__ import annotations
@@ -53,6 +57,9 @@ SENSORS = ("accel", "gyro", "mag")
 #: Model names a part may carry (see :mod:`triaxcal._schema`).
 KNOWN_MODELS = _schema.KNOWN_MODELS
 
+#: Most summaries of replaced calibrations a part keeps (newest first).
+MAX_PREVIOUS = _schema.MAX_PREVIOUS
+
 _AXES = ("x", "y", "z")
 _UPPER = ((0, 1), (0, 2), (1, 2))  # xy, xz, yz
 _LOWER = ((1, 0), (2, 0), (2, 1))  # yx, zx, zy
@@ -78,6 +85,11 @@ def sha256_points(points: Any) -> str:
 def _jsonable(value: Any, what: str) -> Any:
     """Deep-copy ``value`` into plain JSON types (dict/list/str/float/int/bool/None)."""
     return _schema.json_value(value, what)
+
+
+def _summary(d: Any, what: str) -> dict[str, Any]:
+    """A validated, plain-JSON copy of one ``previous`` summary (see the module docstring)."""
+    return _schema.summary(d, what)
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,6 +189,9 @@ class SensorCalibration:
         SHA-256 of the input data (see :func:`sha256_points`), for provenance.
     source : str, optional
         Where the data came from (a file name), for provenance.
+    previous : tuple of dict
+        Summaries of the calibrations of this sensor that this one replaced, newest first (see
+        :meth:`with_previous`).
     """
 
     offset: np.ndarray
@@ -189,6 +204,7 @@ class SensorCalibration:
     stats: dict[str, Any] = field(default_factory=dict)
     input_sha256: str | None = None
     source: str | None = None
+    previous: tuple[dict[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         f = _schema.PART_FIELDS
@@ -203,6 +219,14 @@ class SensorCalibration:
         if not isinstance(self.stats, Mapping):
             raise CalibrationError(f"stats must be a mapping, got {type(self.stats).__name__}")
         object.__setattr__(self, "stats", _schema.stats_object(dict(self.stats), "stats"))
+        prev = self.previous
+        if isinstance(prev, (str, bytes, Mapping)) or not isinstance(prev, (list, tuple)):
+            raise CalibrationError("previous must be a list of summaries (newest first)")
+        if len(prev) > 10 * MAX_PREVIOUS:
+            raise CalibrationError(f"previous holds {len(prev)} summaries; at most "
+                                   f"{MAX_PREVIOUS} are kept")
+        object.__setattr__(self, "previous", tuple(
+            _summary(p, f"previous[{i}]") for i, p in enumerate(prev)))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod
@@ -405,6 +429,63 @@ class SensorCalibration:
         """Whether ``matrix`` is exactly symmetric (as every ellipsoid fit returns)."""
         return all(self.matrix[i, j] == self.matrix[j, i] for i, j in _UPPER)
 
+    # -- history --------------------------------------------------------------------------
+    def summary(self, *, replaced_utc: str | None = None, created_utc: str = "") -> dict[str, Any]:
+        """What ``previous`` keeps of this part once it is replaced: coefficients, units,
+        standard errors, residual RMS and provenance (no temperature terms, no history)."""
+        d: dict[str, Any] = {
+            "replaced_utc": replaced_utc or _now_utc(),
+            "created_utc": created_utc,
+            "raw_unit": self.raw_unit,
+            "unit": self.unit,
+            "offset": self.offset.tolist(),
+            "diag": self.diag.tolist(),
+            "offdiag": self.offdiag.tolist(),
+        }
+        if not self.symmetric:
+            d["offdiag_lower"] = [float(self.matrix[i, j]) for i, j in _LOWER]
+        d["radius"] = self.radius
+        d["model"] = self.model
+        for k in ("stderr", "rms", "n"):
+            if k in self.stats:
+                d[k] = self.stats[k]
+        d["input_sha256"] = self.input_sha256
+        d["source"] = self.source
+        return _summary(d, "summary")
+
+    def with_previous(self, old: SensorCalibration, *, created_utc: str = "",
+                      replaced_utc: str | None = None) -> SensorCalibration:
+        """This part, remembering that it replaced ``old`` (whose file was created at
+        ``created_utc``): ``old``'s summary, then ``old``'s own history, newest first, at most
+        :data:`MAX_PREVIOUS`."""
+        hist = (old.summary(replaced_utc=replaced_utc, created_utc=created_utc),
+                *old.previous)
+        fields = {k: getattr(self, k) for k in ("offset", "matrix", "raw_unit", "unit",
+                                                "radius", "model", "temperature", "stats",
+                                                "input_sha256", "source")}
+        return SensorCalibration(**fields, previous=hist[:MAX_PREVIOUS])
+
+    def previous_part(self, index: int = 0) -> SensorCalibration:
+        """The replaced calibration ``previous[index]`` as a part (its standard errors, RMS and
+        reading count in ``stats``), e.g. to compare with this one."""
+        if not 0 <= index < len(self.previous):
+            raise CalibrationError(
+                f"this part keeps {len(self.previous)} earlier calibration(s); no "
+                f"previous[{index}]"
+            )
+        p = self.previous[index]
+        m = np.diag(p["diag"])
+        lower = p.get("offdiag_lower") or p["offdiag"]
+        for k, (i, j) in enumerate(_UPPER):
+            m[i, j] = p["offdiag"][k]
+            m[j, i] = lower[k]
+        return SensorCalibration(
+            offset=p["offset"], matrix=m, raw_unit=p["raw_unit"], unit=p["unit"],
+            radius=p.get("radius"), model=p.get("model"),
+            stats={k: p[k] for k in ("stderr", "rms", "n") if k in p},
+            input_sha256=p.get("input_sha256"), source=p.get("source"),
+        )
+
     # -- JSON -----------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form (the ``parts.<sensor>`` object of the file)."""
@@ -423,6 +504,8 @@ class SensorCalibration:
         d["input_sha256"] = self.input_sha256
         d["source"] = self.source
         d["stats"] = self.stats
+        if self.previous:
+            d["previous"] = [dict(p) for p in self.previous]
         return d
 
     @classmethod
@@ -450,6 +533,7 @@ class SensorCalibration:
                 stats=v.get("stats") or {},
                 input_sha256=v.get("input_sha256"),
                 source=v.get("source"),
+                previous=v.get("previous") or (),
             )
         except CalibrationError as exc:
             raise CalibrationError(f"{what}: {exc}") from None

@@ -212,6 +212,8 @@ class QualityReport:
     model_reason: str | None = None
     raw_unit: str = "counts"
     extra: dict[str, Any] = field(default_factory=dict)
+    #: Bootstrap intervals (:meth:`triaxcal.methods.bootstrap.BootstrapIntervals.as_dict`).
+    intervals: dict[str, Any] | None = None
 
     @property
     def uniformity(self) -> float:
@@ -241,12 +243,21 @@ class QualityReport:
         ]
         if self.model_reason:
             lines.append(f"  model choice    {self.model_reason}")
+        ci = (self.intervals or {}).get("coefficients") or {}
         if self.stderr:
-            lines.append("  standard errors")
+            lines.append("  standard errors" + (
+                f" and {round(100 * self.intervals['level'])} % bootstrap intervals "
+                f"({self.intervals['n_boot']} refits over {self.intervals['resample']})"
+                if ci and self.intervals else ""))
             for k, v in self.stderr.items():
                 unit = (self.raw_unit if k.startswith("offset") or k == "data_radius"
                         else per_unit(u, self.raw_unit, short=True))
-                lines.append(f"    {k:<12} {v:.3g} {unit}")
+                c = ci.get(k)
+                band = "" if c is None else (
+                    f"   [{c['lower']:.6g}, {c['upper']:.6g}]"
+                    + ("  <- wider than firmware needs" if (c["upper"] - c["lower"]) / 2
+                       > c["tolerance"] else ""))
+                lines.append(f"    {k:<12} {v:.3g} {unit}{band}")
         if self.rejected:
             shown = ", ".join(str(i) for i in self.rejected[:30])
             more = f", ... ({len(self.rejected)} in all)" if len(self.rejected) > 30 else ""
@@ -280,6 +291,7 @@ def quality_report(
     rejected: Sequence[int] | None = None,
     model_reason: str | None = None,
     temperature: Any = None,
+    intervals: Any = None,
 ) -> QualityReport:
     """Build the :class:`QualityReport` of calibration ``cal`` on raw readings ``points``.
 
@@ -298,6 +310,9 @@ def quality_report(
         Why the model was chosen (from :func:`triaxcal.select.fit_auto`).
     temperature : float or array_like, optional
         Temperatures (deg C) for parts with temperature terms.
+    intervals : BootstrapIntervals or dict, optional
+        Bootstrap intervals of the coefficients (:func:`triaxcal.bootstrap`), shown beside the
+        standard errors; wide ones are warned about. Default: ``cal.stats["intervals"]``.
 
     Returns
     -------
@@ -334,6 +349,14 @@ def quality_report(
     if fit is not None:
         stderr = fit.stderr_dict
     warnings = _warnings(part, fit, sensor, n, rej, rms / radius * 100, cov, holes, nk)
+    if intervals is None:
+        intervals = part.stats.get("intervals")
+    elif hasattr(intervals, "as_dict"):
+        intervals = intervals.as_dict()
+    if intervals is not None:
+        if not isinstance(intervals, dict) or not isinstance(intervals.get("coefficients"), dict):
+            raise CalibrationError("intervals must come from triaxcal.bootstrap")
+        warnings += [w for w in intervals.get("warnings", []) if w not in warnings]
     return QualityReport(
         sensor=sensor,
         unit=part.unit,
@@ -356,6 +379,7 @@ def quality_report(
         rejected=rej,
         warnings=warnings,
         model_reason=model_reason or part.stats.get("model_reason"),
+        intervals=intervals,
     )
 
 

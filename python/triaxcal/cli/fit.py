@@ -159,6 +159,10 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="magnetometer: the fuse-ROM sensitivity bytes ASAX,ASAY,ASAZ of an "
                         "AK8963 (AK8975, AK09911, AK09912), applied before fitting as "
                         "k = (ASA - 128) / 256 + 1; the part still takes the register counts")
+    p.add_argument("--bootstrap", type=int, default=0, metavar="N",
+                   help="also compute 95 %% bootstrap intervals of every coefficient from N "
+                        "refits (e.g. 1000, fixed seed), stored in the calibration, shown by "
+                        "report and used by diff")
     add_pose_options(p)
     p.add_argument("--skip-bad-lines", action="store_true",
                    help="skip lines of the data file that are not a row of numbers (and count "
@@ -259,6 +263,16 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     low = coverage_warning(cov, sensor)
     stats["warnings"] = [*stats.get("warnings", []), *([low] if low else []),
                          *(n[len("warning: "):] for n in notes if n.startswith("warning: "))]
+    if getattr(args, "bootstrap", 0):
+        from ..methods.bootstrap import bootstrap
+
+        if fitted is not pts:
+            raise CalibrationError("--bootstrap with --asa is not supported: the intervals "
+                                   "would describe the ASA-adjusted coefficients")
+        ci = bootstrap(fitted[rob.inliers], fit=rob.fit, radius=radius, n_boot=args.bootstrap,
+                       raw_unit=raw_unit, unit=unit)
+        stats["intervals"] = ci.as_dict()
+        stats["warnings"] = list(stats.get("warnings", [])) + ci.warnings()
     part = SensorCalibration(**{**_fields(part), "stats": stats})
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
                       reason=rob.model_reason, table=table, source=src, notes=notes)
@@ -267,7 +281,7 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
 def _fields(part: SensorCalibration) -> dict[str, Any]:
     return {k: getattr(part, k) for k in ("offset", "matrix", "raw_unit", "unit", "radius",
                                           "model", "temperature", "stats", "input_sha256",
-                                          "source")}
+                                          "source", "previous")}
 
 
 def undetermined(part: SensorCalibration, points: Any) -> list[str]:
@@ -317,7 +331,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("-o", "--output", required=True, metavar="CAL.json",
                    help="calibration file to write; an existing one keeps its other sensors")
     p.add_argument("--new", action="store_true",
-                   help="overwrite CAL.json instead of adding this sensor to it")
+                   help="overwrite CAL.json instead of adding this sensor to it (the replaced "
+                        "calibration of this sensor is still kept in its 'previous' summary)")
     p.add_argument("--sensor-id", default=None, help="board / sensor id to record")
     p.add_argument("--force", action="store_true",
                    help="write the calibration even when the fit did not converge or its "
@@ -355,6 +370,15 @@ def run(args: argparse.Namespace) -> int:
             raise CalibrationError(
                 f"{path} exists but is not a calibration file ({exc}); pass --new to replace it"
             ) from None
+    # the calibration this one replaces is not lost: its summary goes into `previous`
+    old = cal
+    if old is None and path.exists():
+        try:
+            old = Calibration.load(path)
+        except CalibrationError:
+            old = None  # --new over a file that is not a calibration: nothing to keep
+    if old is not None and getattr(old, out.sensor) is not None:
+        out.part = out.part.with_previous(old.part(out.sensor), created_utc=old.created_utc)
     if cal is None:
         parts: dict[str, Any] = {out.sensor: out.part}
         cal = Calibration(**parts, sensor_id=args.sensor_id or "")

@@ -138,6 +138,11 @@ def run(args: argparse.Namespace) -> int:
     skip = getattr(args, "skip_bad_lines", False)
     reports: dict[str, QualityReport] = {}
     if _is_calibration(path):
+        if getattr(args, "bootstrap", 0):
+            raise CalibrationError(
+                "--bootstrap applies when a session is fitted: triaxcal fit SESSION --bootstrap N "
+                "stores the intervals in the calibration, and report shows them"
+            )
         cal = Calibration.load(path)
         sensors = [args.sensor] if args.sensor else list(cal.sensors)
         for sensor in sensors:
