@@ -159,10 +159,10 @@ def test_hostile_inputs(tmp_path, capsys):
 
 def test_library_call_in_process():
     counts = make_board(11)[0]
-    from triaxcal.cli.fit import Table
+    from triaxcal.io.tables import Table
 
     t = Table(names=("ax", "ay", "az"), data=counts.astype(float), path=__import__(
-        "pathlib").Path("mem"), sha256="0")
+        "pathlib").Path("mem"), sha256="0" * 64)
     res = batch_fit([("a", t)], args=fit_options(window=WINDOW), limits=Limits(), jobs=1)
     assert res[0].passed and res[0].part is not None and res[0].outputs == ()
     with pytest.raises(CalibrationError):

@@ -252,18 +252,16 @@ def _fit_checks(part: SensorCalibration, noise_raw: float | None, limits: Limits
 
 
 def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float | None:
-    """Sensor noise (raw units, rms): within each still pose the standard deviation of the
-    sample-to-sample differences over sqrt(2) (blind to slow drift and to the slow ends of
-    moves), largest axis; the median over poses."""
+    """Sensor noise (raw units, rms): within each still pose (found as ``fit --poses`` finds
+    them) the standard deviation of the sample-to-sample differences over sqrt(2) (blind to
+    slow drift and to the slow ends of moves), largest axis; the median over poses."""
     if not args.poses:
         return None
-    from ..detect import detect_poses
+    from ..cli._poses import settings_from_args
+    from ..poses import sensor_columns, session_poses
 
-    names = table.names or ()
-    acc = ["ax", "ay", "az"]
-    det_cols = [names.index(c) for c in acc] if all(c in names for c in acc) else cols
-    det = detect_poses(table.data, window=args.window, units_per_g=args.units_per_g,
-                       columns=det_cols)
+    accel = None if "accel" in sensor_columns(table.names) else cols
+    det, _ = session_poses(table.names, table.data, settings_from_args(args), accel=accel)
     noise = []
     for p in det.poses:
         seg = table.data[p.start:p.end][:, cols]
@@ -287,7 +285,8 @@ def judge(
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
-    from ..cli.fit import fit_table, pick_columns
+    from ..cli.fit import fit_table
+    from ..io.tables import pick_columns
 
     source = str(table.path)
     fails: list[tuple[str, str]] = []
@@ -309,9 +308,10 @@ def judge(
         pts = raw
         if args.poses:
             try:
-                from ..cli.fit import _pose_points
+                from ..cli._poses import settings_from_args
+                from ..cli.fit import pose_points
 
-                pts = _pose_points(table, cols, args)
+                pts, _ = pose_points(table, cols, settings_from_args(args))
             except CalibrationError:
                 pts = raw[:0]
         cov = _coverage(pts)
@@ -379,7 +379,7 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
     Returns ``[(board id, Table)]`` in the order ids first appear; each board's rows keep the
     file's order. Parquet needs pyarrow (``pip install 'triaxcal[dask]'``).
     """
-    from ..cli.fit import Table
+    from ..io.tables import Table
 
     p = Path(path)
     if not p.exists():
@@ -450,7 +450,7 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
 
 def _work(job: tuple[str, Any, argparse.Namespace, Limits, str | None, str]) -> BoardResult:
     board_id, src, args, limits, out_dir, prefix = job
-    from ..cli.fit import read_table
+    from ..io.tables import read_table
 
     if isinstance(src, (str, Path)):
         try:
