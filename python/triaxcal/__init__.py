@@ -18,6 +18,7 @@ from .detect import (
     still_intervals,
 )
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
+from .field import ExpectedField, expected_field
 from .export import (
     adafruit_calib_json,
     ardupilot_parm,
@@ -75,6 +76,8 @@ from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "ExpectedField",
+    "expected_field",
     "LogRecording",
     "Stream",
     "adafruit_calib_json",
