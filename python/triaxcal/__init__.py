@@ -4,9 +4,9 @@ Fits run in Rust (``triaxcal._core``) with the GIL released; capture, export and
 Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
 """
 
-from . import sim
+from . import rotations, sim
 from ._core import __version__
-from .calibration import Calibration, SensorCalibration, TemperatureTerms
+from .calibration import Alignment, Calibration, SensorCalibration, TemperatureTerms
 from .detect import (
     Pose,
     PoseDetection,
@@ -18,7 +18,6 @@ from .detect import (
     still_intervals,
 )
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
-from .field import ExpectedField, expected_field
 from .export import (
     adafruit_calib_json,
     ardupilot_parm,
@@ -31,6 +30,7 @@ from .export import (
     px4_params_file,
     write_outputs,
 )
+from .field import ExpectedField, expected_field
 from .fit import (
     MODELS,
     BatchFit,
@@ -47,6 +47,13 @@ from .fit import (
 )
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
+from .methods.alignment import (
+    AlignmentWarning,
+    MagAccelAlignment,
+    align_mag_accel,
+    axis_heading,
+    heading_errors,
+)
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -76,6 +83,13 @@ from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "Alignment",
+    "AlignmentWarning",
+    "MagAccelAlignment",
+    "align_mag_accel",
+    "axis_heading",
+    "heading_errors",
+    "rotations",
     "ExpectedField",
     "expected_field",
     "LogRecording",

@@ -14,6 +14,11 @@ The JSON file (``"schema": "triaxcal.calibration/1"``) keeps the autopilots' par
 ``offset``, ``diag``, ``offdiag`` (``[xy, xz, yz]``, the upper triangle; a non-symmetric matrix
 adds ``offdiag_lower`` ``[yx, zx, zy]``) and ``radius``. Floats are written with ``repr`` (the
 shortest text that reads back to the same double), so ``load(save(cal)) == cal`` exactly.
+
+A magnetometer part may also hold the field the World Magnetic Model expects where it was
+calibrated (``expected_field``, :class:`triaxcal.field.ExpectedField`) and its alignment with
+the accelerometer (``alignment``, :class:`Alignment`: ``v_accel = rotation @ v_mag`` for
+calibrated readings; :meth:`SensorCalibration.apply_aligned`).
 """
 
 from __future__ import annotations
@@ -33,10 +38,14 @@ import numpy as np
 from ._core import __version__
 from ._validate import as_points
 from .errors import CalibrationError
+from .field import ExpectedField
+from .rotations import mounting as _mounting
+from .rotations import rotation_angle_deg
 
 __all__ = [
     "SCHEMA",
     "SENSORS",
+    "Alignment",
     "Calibration",
     "SensorCalibration",
     "TemperatureTerms",
@@ -219,6 +228,90 @@ def _horner(poly: np.ndarray, dt: np.ndarray) -> np.ndarray:
         acc = acc * dt + row
     return acc
 
+#: A stored mounting must lie within this angle (deg) of the stored rotation.
+MAX_MOUNTING_DEG = 20.0
+
+
+@dataclass(frozen=True, eq=False)
+class Alignment:
+    """Rotation of a part's calibrated frame into another part's: ``v_to = rotation @ v``.
+
+    Attributes
+    ----------
+    to : str
+        The part whose frame ``rotation`` turns into (``"accel"`` for a magnetometer).
+    rotation : ndarray (3, 3)
+        A proper rotation (orthonormal, determinant +1, checked to 1e-6).
+    mounting : str or None
+        The nearest of the 24 right-angle rotations (ArduPilot's / PX4's name, e.g.
+        ``"ROTATION_ROLL_90"``; :mod:`triaxcal.rotations`) when it lies within 20 deg of
+        ``rotation``: what ``COMPASS_ORIENTn`` / ``CAL_MAGn_ROT`` can hold.
+    stats : dict
+        How it was found (dip angle and its spread before / after, poses, standard errors).
+    """
+
+    rotation: np.ndarray
+    to: str = "accel"
+    mounting: str | None = None
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        r = _array(self.rotation, (3, 3), "alignment.rotation")
+        if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) <= 0:
+            raise CalibrationError(
+                "alignment.rotation must be a proper rotation (orthonormal rows, determinant "
+                f"+1), got {r.tolist()}; a mirrored axis is a sign error in the readings")
+        object.__setattr__(self, "rotation", r)
+        if self.to not in SENSORS:
+            raise CalibrationError(f"alignment.to must be one of {SENSORS}, got {self.to!r}")
+        if self.mounting is not None:
+            if not isinstance(self.mounting, str):
+                raise CalibrationError(f"alignment.mounting must be a rotation name or null, "
+                                       f"got {self.mounting!r}")
+            m = _mounting(self.mounting)
+            ang = rotation_angle_deg(r, m.matrix)
+            if ang > MAX_MOUNTING_DEG:
+                raise CalibrationError(
+                    f"alignment.mounting {m.name} is {ang:.1f} deg from alignment.rotation "
+                    f"(at most {MAX_MOUNTING_DEG:g}): the two disagree")
+            object.__setattr__(self, "mounting", m.name)
+        if not isinstance(self.stats, Mapping):
+            raise CalibrationError("alignment.stats must be a JSON object")
+        object.__setattr__(self, "stats", _jsonable(dict(self.stats), "alignment.stats"))
+
+    @property
+    def mounting_residual_deg(self) -> float | None:
+        """Angle between ``rotation`` and ``mounting`` (deg), None without a mounting."""
+        if self.mounting is None:
+            return None
+        return rotation_angle_deg(self.rotation, _mounting(self.mounting).matrix)
+
+    @classmethod
+    def from_result(cls, result: Any, to: str = "accel") -> Alignment:
+        """From a :class:`triaxcal.methods.alignment.MagAccelAlignment`."""
+        mnt = getattr(result, "mounting", None)
+        return cls(rotation=result.rotation, to=to, mounting=None if mnt is None else mnt.name,
+                   stats=result.stats())
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"to": self.to, "rotation": self.rotation.tolist(), "mounting": self.mounting,
+                "stats": self.stats}
+
+    @classmethod
+    def from_dict(cls, d: Any, what: str = "alignment") -> Alignment:
+        _keys(d, {"to", "rotation"}, {"mounting", "stats"}, what)
+        stats = d.get("stats") or {}
+        try:
+            return cls(rotation=d["rotation"], to=d["to"], mounting=d.get("mounting"),
+                       stats=stats)
+        except CalibrationError as exc:
+            raise CalibrationError(f"{what}: {exc}") from None
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Alignment) and self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
 
 @dataclass(frozen=True, eq=False)
 class SensorCalibration:
@@ -247,6 +340,11 @@ class SensorCalibration:
         SHA-256 of the input data (see :func:`sha256_points`), for provenance.
     source : str, optional
         Where the data came from (a file name), for provenance.
+    expected_field : ExpectedField, optional
+        The field the World Magnetic Model expects where the part was calibrated (magnetometer).
+    alignment : Alignment, optional
+        Rotation of this part's calibrated frame into another part's (magnetometer into
+        accelerometer); :meth:`apply_aligned` applies it.
     """
 
     offset: np.ndarray
@@ -259,6 +357,8 @@ class SensorCalibration:
     stats: dict[str, Any] = field(default_factory=dict)
     input_sha256: str | None = None
     source: str | None = None
+    expected_field: ExpectedField | None = None
+    alignment: Alignment | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "offset", _array(self.offset, (3,), "offset"))
@@ -281,6 +381,12 @@ class SensorCalibration:
             v = getattr(self, name)
             if v is not None and not isinstance(v, str):
                 raise CalibrationError(f"{name} must be a string or None, got {v!r}")
+        if self.expected_field is not None and not isinstance(self.expected_field,
+                                                              ExpectedField):
+            object.__setattr__(self, "expected_field",
+                               ExpectedField.from_dict(self.expected_field))
+        if self.alignment is not None and not isinstance(self.alignment, Alignment):
+            object.__setattr__(self, "alignment", Alignment.from_dict(self.alignment))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod
@@ -468,6 +574,24 @@ class SensorCalibration:
         out = d @ self.matrix.T
         return out[0] if single else out
 
+    def apply_aligned(self, raw: Any, temperature: Any = None) -> np.ndarray:
+        """Calibrate, then turn into the aligned frame: ``apply(raw) @ alignment.rotation.T``.
+
+        Raises :class:`CalibrationError` when the part has no alignment.
+        """
+        if self.alignment is None:
+            raise CalibrationError(
+                "this part has no alignment: fit one with tc.align_mag_accel (or `triaxcal fit "
+                "--sensor mag --align`), or use apply()")
+        out = self.apply(raw, temperature=temperature)
+        return out @ self.alignment.rotation.T
+
+    def replace(self, **changes: Any) -> SensorCalibration:
+        """A copy with some fields changed (e.g. ``part.replace(alignment=None)``)."""
+        import dataclasses
+
+        return dataclasses.replace(self, **changes)
+
     @property
     def diag(self) -> np.ndarray:
         """Diagonal of ``matrix`` (per-axis gain), calibrated units per raw unit."""
@@ -501,6 +625,10 @@ class SensorCalibration:
         d["input_sha256"] = self.input_sha256
         d["source"] = self.source
         d["stats"] = self.stats
+        if self.expected_field is not None:
+            d["expected_field"] = self.expected_field.to_dict()
+        if self.alignment is not None:
+            d["alignment"] = self.alignment.to_dict()
         return d
 
     @classmethod
@@ -509,7 +637,8 @@ class SensorCalibration:
         _keys(
             d,
             {"raw_unit", "unit", "offset", "diag", "offdiag"},
-            {"offdiag_lower", "radius", "model", "temperature", "input_sha256", "source", "stats"},
+            {"offdiag_lower", "radius", "model", "temperature", "input_sha256", "source", "stats",
+             "expected_field", "alignment"},
             what,
         )
         diag = _array(d["diag"], (3,), f"{what}.diag")
@@ -537,6 +666,10 @@ class SensorCalibration:
                 stats=dict(stats),
                 input_sha256=d.get("input_sha256"),
                 source=d.get("source"),
+                expected_field=(None if d.get("expected_field") is None
+                                else ExpectedField.from_dict(d["expected_field"])),
+                alignment=(None if d.get("alignment") is None
+                           else Alignment.from_dict(d["alignment"])),
             )
         except CalibrationError as exc:
             raise CalibrationError(f"{what}: {exc}") from None
@@ -613,6 +746,11 @@ class Calibration:
                 )
         if not any(getattr(self, s) is not None for s in SENSORS):
             raise CalibrationError("a Calibration needs at least one of accel, gyro, mag")
+        for name in SENSORS:
+            part = getattr(self, name)
+            if part is not None and part.alignment is not None and part.alignment.to == name:
+                raise CalibrationError(f"{name}.alignment.to is {name}: a part cannot be aligned "
+                                       "to itself")
         for name in ("sensor_id", "created_utc", "library_version"):
             if not isinstance(getattr(self, name), str):
                 raise CalibrationError(f"{name} must be a string")

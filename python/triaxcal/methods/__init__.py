@@ -7,8 +7,17 @@
 * :mod:`~triaxcal.methods.temperature` -- offsets and gains as polynomials in temperature.
 * :mod:`~triaxcal.methods.static` -- methods that need no fit: tilt rig, six-position
   min/max, Ferraris closed form.
+* :mod:`~triaxcal.methods.alignment` -- magnetometer-to-accelerometer alignment, mounting
+  rotation, dip angle, tilt-compensated heading.
 """
 
+from .alignment import (
+    AlignmentWarning,
+    MagAccelAlignment,
+    align_mag_accel,
+    axis_heading,
+    heading_errors,
+)
 from .gyro import (
     GyroBias,
     GyroGains,
@@ -31,6 +40,11 @@ from .static import (
 from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
 
 __all__ = [
+    "AlignmentWarning",
+    "MagAccelAlignment",
+    "align_mag_accel",
+    "axis_heading",
+    "heading_errors",
     "FerrarisCalibration",
     "GyroBias",
     "GyroGains",
