@@ -79,10 +79,13 @@ from .methods.static import (
     tilt_rig,
 )
 from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .methods.yaw import YawCalibration, fit_yaw
 from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "YawCalibration",
+    "fit_yaw",
     "Alignment",
     "AlignmentWarning",
     "MagAccelAlignment",

@@ -7,6 +7,8 @@
 * :mod:`~triaxcal.methods.temperature` -- offsets and gains as polynomials in temperature.
 * :mod:`~triaxcal.methods.static` -- methods that need no fit: tilt rig, six-position
   min/max, Ferraris closed form.
+* :mod:`~triaxcal.methods.yaw` -- yaw-only magnetometer calibration (turns about the
+  vertical, the vertical part from the World Magnetic Model).
 * :mod:`~triaxcal.methods.alignment` -- magnetometer-to-accelerometer alignment, mounting
   rotation, dip angle, tilt-compensated heading.
 """
@@ -38,8 +40,11 @@ from .static import (
     tilt_rig,
 )
 from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .yaw import YawCalibration, fit_yaw
 
 __all__ = [
+    "YawCalibration",
+    "fit_yaw",
     "AlignmentWarning",
     "MagAccelAlignment",
     "align_mag_accel",
