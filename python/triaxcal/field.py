@@ -35,6 +35,7 @@ from typing import Any
 from .errors import CalibrationError
 
 __all__ = [
+    "STRENGTH_TOLERANCE",
     "MODEL",
     "VALID_FROM",
     "VALID_UNTIL",
@@ -42,7 +43,11 @@ __all__ = [
     "decimal_year",
     "expected_field",
     "parse_location",
+    "strength_check",
 ]
+
+#: The fitted field strength may differ from the model's by this share before it is warned about.
+STRENGTH_TOLERANCE = 0.10
 
 #: The geomagnetic model evaluated.
 MODEL = "WMM2025"
@@ -354,3 +359,28 @@ def expected_field(lat: float, lon: float, alt_m: float = 0.0, date: Any = None
         lon_deg=lon_f, alt_m=alt_f, total_ut=f / 1000.0, horizontal_ut=h / 1000.0,
         north_ut=x / 1000.0, east_ut=y / 1000.0, down_ut=z / 1000.0, inclination_deg=inc,
         declination_deg=dec, uncertainty=unc, warnings=tuple(warn))
+
+
+def strength_check(measured_ut: float | None, expected: float, what: str = "field"
+                   ) -> str | None:
+    """A warning when the field the readings show (uT) is more than 10 % from the model's.
+
+    ``measured_ut`` is the strength in the sensor's own units converted to uT (None when the
+    readings are raw counts: nothing to compare). ArduPilot's calibrator refuses a fit whose
+    expected-to-fitted ratio leaves 0.85..1.4 ("bad radius", ``CompassCalibrator::fix_radius``);
+    triaxcal warns earlier, at 10 %, and keeps the fit.
+
+    >>> strength_check(61.0, 48.4) is not None, strength_check(49.0, 48.4)
+    (True, None)
+    """
+    if measured_ut is None or not math.isfinite(measured_ut):
+        return None
+    ratio = measured_ut / expected
+    if abs(ratio - 1) <= STRENGTH_TOLERANCE:
+        return None
+    ap = (" (ArduPilot's calibrator would refuse it: 'bad radius')"
+          if not 0.85 <= 1 / ratio <= 1.4 else "")
+    return (f"the {what} strength the readings show, {measured_ut:.3g} uT, is "
+            f"{100 * (ratio - 1):+.0f} % from the World Magnetic Model's {expected:.3g} uT here"
+            f"{ap}: a magnetised environment (steel, magnets, motors, cables nearby), a wrong "
+            "location, or readings not in the stated unit; calibrate away from metal")

@@ -25,7 +25,10 @@ import numpy as np
 
 from ..calibration import SENSORS, Calibration, SensorCalibration
 from ..errors import CalibrationError
+from ..field import ExpectedField
 from ..fit import MODELS
+from ..units import unit_factor
+from ._field import add_field_options, alignment_for, expected_from_args, field_stats, yaw_part
 from ._source import Source, add_source_options, autopilot_lines, autopilot_stats, load_source
 
 #: Default column names per sensor (the device channel order,
@@ -244,6 +247,7 @@ class FitOutcome:
     reason: str | None
     table: Table | None
     source: Source | None = None
+    expected: ExpectedField | None = None
 
 
 def _pose_points(table: Table, cols: list[int], args: argparse.Namespace) -> np.ndarray:
@@ -266,10 +270,26 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     from ..select import fit_robust
 
     sensor = args.sensor or "accel"
+    expected = expected_from_args(args, sensor)
+    if (getattr(args, "yaw_only", False) or getattr(args, "align", False)) and sensor != "mag":
+        raise CalibrationError("--yaw-only and --align apply to --sensor mag")
     src = load_source(args.data, sensor, args)
     table, pts = src.table, src.points
     raw_unit = args.raw_unit or src.raw_unit or "counts"
-    if args.radius is not None:
+    if getattr(args, "yaw_only", False):
+        if args.radius is not None and args.radius.strip().lower() != "wmm":
+            raise CalibrationError("--yaw-only takes the field from --location (the World "
+                                   "Magnetic Model); drop --radius")
+        part = yaw_part(args, src, expected, raw_unit)
+        if expected is not None:
+            part, _ = field_stats(part, expected)
+        return FitOutcome(part=part, points=pts, sensor=sensor,
+                          rejected=np.zeros(0, dtype=np.int64), reason=None, table=table,
+                          source=src, expected=expected)
+    if expected is not None and args.radius is not None and args.radius.strip().lower() == "wmm":
+        unit = args.unit or "uT"
+        radius = expected.total_ut * unit_factor("uT", unit)
+    elif args.radius is not None:
         radius, unit = parse_radius(args.radius, sensor)
     elif DEFAULT_RADIUS[sensor] is not None:
         radius, unit = DEFAULT_RADIUS[sensor]  # type: ignore[misc]
@@ -305,8 +325,10 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     stats = dict(part.stats)
     stats["coverage_pct"] = coverage(part.apply(pts[rob.inliers]))[1]
     part = SensorCalibration(**{**_fields(part), "stats": stats})
+    if expected is not None:
+        part, _ = field_stats(part, expected)
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
-                      reason=rob.model_reason, table=table, source=src)
+                      reason=rob.model_reason, table=table, source=src, expected=expected)
 
 
 def _fields(part: SensorCalibration) -> dict[str, Any]:
@@ -330,11 +352,16 @@ def register(subparsers: Any) -> None:
     p.add_argument("--new", action="store_true",
                    help="overwrite CAL.json instead of adding this sensor to it")
     p.add_argument("--sensor-id", default=None, help="board / sensor id to record")
+    add_field_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     out = fit_file(args)
+    align_text = None
+    if getattr(args, "align", False):
+        al, align_text = alignment_for(args, out.source, out.part, out.expected)
+        out.part = out.part.replace(alignment=al)
     path = Path(args.output)
     cal = None
     if path.exists() and not args.new:
@@ -367,6 +394,16 @@ def run(args: argparse.Namespace) -> int:
     )
     if out.reason:
         print(f"  model: {out.reason}")
+    if out.expected is not None:
+        print(f"  expected field: {out.expected.text()}")
+        if s.get("field_strength_ut") is not None:
+            print(f"  the readings show {s['field_strength_ut']:.4g} uT")
+    if "yaw" in s:
+        from ..methods.yaw import yaw_text
+
+        print("  " + yaw_text(s["yaw"], out.part.unit).replace("\n", "\n  "))
+    if align_text:
+        print("  " + align_text.replace("\n", "\n  "))
     for w in s.get("warnings", []):
         print(f"  warning: {w}")
     if out.source is not None and out.source.recording is not None:

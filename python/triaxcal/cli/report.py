@@ -17,7 +17,7 @@ from typing import Any
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..io.logs import is_log
-from ..report import QualityReport, plot_report, quality_report
+from ..report import QualityReport, context_lines, plot_report, quality_report
 from ._source import load_source
 from .fit import add_fit_options, fit_file, pick_columns, read_table
 
@@ -76,6 +76,7 @@ def _stored_text(sensor: str, part: SensorCalibration) -> str:
         lines.append(f"  coverage        {s['coverage_pct']:.0f} % of the sphere")
     if s.get("rejected") is not None:
         lines.append(f"  outliers        {len(s['rejected'])} rejected")
+    lines += context_lines(part)
     for w in s.get("warnings", []):
         lines.append(f"    - {w}")
     return "\n".join(lines)

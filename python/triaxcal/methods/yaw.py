@@ -63,6 +63,8 @@ class YawCalibration:
     horizontal, vertical : float or None
         The ``H`` and ``V`` (up positive) the fit used, calibrated units; ``vertical`` None
         without a location.
+    raw_horizontal : float
+        The horizontal field the raw readings show (the ellipse's mean radius), raw units.
     rms_horizontal_pct : float
         RMS of the calibrated horizontal magnitude about ``horizontal``, in % of it.
     heading_rms_est_deg : float
@@ -85,6 +87,7 @@ class YawCalibration:
     raw_unit: str
     horizontal: float
     vertical: float | None
+    raw_horizontal: float
     rms_horizontal_pct: float
     heading_rms_est_deg: float
     tilt_heading_deg: float | None
@@ -104,6 +107,7 @@ class YawCalibration:
         return {
             "horizontal": float(self.horizontal),
             "vertical": None if self.vertical is None else float(self.vertical),
+            "raw_horizontal": float(self.raw_horizontal),
             "rms_horizontal_pct": float(self.rms_horizontal_pct),
             "heading_rms_est_deg": float(self.heading_rms_est_deg),
             "tilt_heading_deg": (None if self.tilt_heading_deg is None
@@ -398,7 +402,8 @@ def fit_yaw(
                       "vertical fit best on flat ground or calm water")
     return YawCalibration(
         offset=_ro(offset), matrix=_ro(0.5 * (matrix + matrix.T)), unit=unit,
-        raw_unit=raw_unit, horizontal=h, vertical=v, rms_horizontal_pct=rms_pct,
+        raw_unit=raw_unit, horizontal=h, vertical=v, raw_horizontal=own_h,
+        rms_horizontal_pct=rms_pct,
         heading_rms_est_deg=heading_est, tilt_heading_deg=tilt_heading, level_up=_ro(mean_up),
         tilt_std_deg=float(tilt.std()), n=n, determined=tuple(determined),
         assumed=tuple(assumed), limits=tuple(limits))
