@@ -39,8 +39,7 @@ from ._core import __version__
 from ._validate import as_points
 from .errors import CalibrationError
 from .field import ExpectedField
-from .rotations import mounting as _mounting
-from .rotations import rotation_angle_deg
+from .rotations import Alignment
 
 __all__ = [
     "SCHEMA",
@@ -227,91 +226,6 @@ def _horner(poly: np.ndarray, dt: np.ndarray) -> np.ndarray:
     for row in poly[-2::-1]:
         acc = acc * dt + row
     return acc
-
-#: A stored mounting must lie within this angle (deg) of the stored rotation.
-MAX_MOUNTING_DEG = 20.0
-
-
-@dataclass(frozen=True, eq=False)
-class Alignment:
-    """Rotation of a part's calibrated frame into another part's: ``v_to = rotation @ v``.
-
-    Attributes
-    ----------
-    to : str
-        The part whose frame ``rotation`` turns into (``"accel"`` for a magnetometer).
-    rotation : ndarray (3, 3)
-        A proper rotation (orthonormal, determinant +1, checked to 1e-6).
-    mounting : str or None
-        The nearest of the 24 right-angle rotations (ArduPilot's / PX4's name, e.g.
-        ``"ROTATION_ROLL_90"``; :mod:`triaxcal.rotations`) when it lies within 20 deg of
-        ``rotation``: what ``COMPASS_ORIENTn`` / ``CAL_MAGn_ROT`` can hold.
-    stats : dict
-        How it was found (dip angle and its spread before / after, poses, standard errors).
-    """
-
-    rotation: np.ndarray
-    to: str = "accel"
-    mounting: str | None = None
-    stats: dict[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        r = _array(self.rotation, (3, 3), "alignment.rotation")
-        if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) <= 0:
-            raise CalibrationError(
-                "alignment.rotation must be a proper rotation (orthonormal rows, determinant "
-                f"+1), got {r.tolist()}; a mirrored axis is a sign error in the readings")
-        object.__setattr__(self, "rotation", r)
-        if self.to not in SENSORS:
-            raise CalibrationError(f"alignment.to must be one of {SENSORS}, got {self.to!r}")
-        if self.mounting is not None:
-            if not isinstance(self.mounting, str):
-                raise CalibrationError(f"alignment.mounting must be a rotation name or null, "
-                                       f"got {self.mounting!r}")
-            m = _mounting(self.mounting)
-            ang = rotation_angle_deg(r, m.matrix)
-            if ang > MAX_MOUNTING_DEG:
-                raise CalibrationError(
-                    f"alignment.mounting {m.name} is {ang:.1f} deg from alignment.rotation "
-                    f"(at most {MAX_MOUNTING_DEG:g}): the two disagree")
-            object.__setattr__(self, "mounting", m.name)
-        if not isinstance(self.stats, Mapping):
-            raise CalibrationError("alignment.stats must be a JSON object")
-        object.__setattr__(self, "stats", _jsonable(dict(self.stats), "alignment.stats"))
-
-    @property
-    def mounting_residual_deg(self) -> float | None:
-        """Angle between ``rotation`` and ``mounting`` (deg), None without a mounting."""
-        if self.mounting is None:
-            return None
-        return rotation_angle_deg(self.rotation, _mounting(self.mounting).matrix)
-
-    @classmethod
-    def from_result(cls, result: Any, to: str = "accel") -> Alignment:
-        """From a :class:`triaxcal.methods.alignment.MagAccelAlignment`."""
-        mnt = getattr(result, "mounting", None)
-        return cls(rotation=result.rotation, to=to, mounting=None if mnt is None else mnt.name,
-                   stats=result.stats())
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"to": self.to, "rotation": self.rotation.tolist(), "mounting": self.mounting,
-                "stats": self.stats}
-
-    @classmethod
-    def from_dict(cls, d: Any, what: str = "alignment") -> Alignment:
-        _keys(d, {"to", "rotation"}, {"mounting", "stats"}, what)
-        stats = d.get("stats") or {}
-        try:
-            return cls(rotation=d["rotation"], to=d["to"], mounting=d.get("mounting"),
-                       stats=stats)
-        except CalibrationError as exc:
-            raise CalibrationError(f"{what}: {exc}") from None
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, Alignment) and self.to_dict() == other.to_dict()
-
-    __hash__ = None  # type: ignore[assignment]
-
 
 @dataclass(frozen=True, eq=False)
 class SensorCalibration:

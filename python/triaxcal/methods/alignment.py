@@ -36,7 +36,13 @@ import numpy as np
 
 from .._validate import as_points
 from ..errors import CalibrationError
-from ..rotations import MOUNTINGS, Mounting, nearest_mounting, rotation_angle_deg
+from ..rotations import (
+    MAX_MOUNTING_DEG,
+    MOUNTINGS,
+    Mounting,
+    nearest_mounting,
+    rotation_angle_deg,
+)
 
 __all__ = [
     "MAX_MOUNTING_DEG",
@@ -49,8 +55,6 @@ __all__ = [
     "paired_still_poses",
 ]
 
-#: The estimated rotation is reported as a right-angle mounting only within this angle (deg).
-MAX_MOUNTING_DEG = 20.0
 #: A rotation axis whose standard error exceeds this (deg) is reported as undetermined.
 _UNDETERMINED_DEG = 2.0
 
