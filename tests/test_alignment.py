@@ -197,7 +197,7 @@ def test_alignment_round_trips_and_applies():
     ({"rotation": [[1, 0], [0, 1]]}, "shape"),
     ({"mounting": "ROTATION_YAW_90"}, "disagree"),
     ({"mounting": "ROTATION_SIDEWAYS"}, "unknown mounting"),
-    ({"mounting": 2}, "rotation name"),
+    ({"mounting": 2}, "mounting must be text"),
     ({"to": "compass"}, "alignment.to"),
     ({"to": "mag"}, "to itself"),
     ({"colour": "red"}, "unknown field"),
