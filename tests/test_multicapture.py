@@ -85,12 +85,14 @@ def test_two_boards_one_unplugged_nothing_lost(tmp_path):
     assert len(before) > 100 and len(after) > 100
     assert np.array_equal(before, np.arange(before[0], before[-1] + 1))
     in_flight = unplug_at["before"] - 1 - before[-1]
-    assert 0 <= in_flight <= 0.1 * RATE * SPEED  # at most 0.1 s of frames, lost with the port
+    # only the frames in flight in the pseudo-terminal when it vanished (a fraction of a second;
+    # the bound leaves room for a loaded machine, where the reader runs late)
+    assert 0 <= in_flight <= 0.5 * RATE * SPEED
     assert np.array_equal(after, np.arange(after[0], after[-1] + 1))
     # the reader discards what arrives while it settles after re-sending the mode byte (20 ms
     # sleep, then it flushes its input as at the start of every capture; longer on a busy
     # machine)
-    assert 0 <= after[0] - unplug_at["after"] <= 0.1 * RATE * SPEED
+    assert 0 <= after[0] - unplug_at["after"] <= 0.5 * RATE * SPEED
 
 
 def test_boards_without_the_id_command_are_named_by_port(tmp_path, capsys):
