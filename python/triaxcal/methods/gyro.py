@@ -103,8 +103,8 @@ def integrate_rate(rate: Any, t: Any) -> np.ndarray:
     >>> integrate_rate(rate, t)[-1].round(6).tolist()
     [90.0, 0.0, 90.0]
     """
-    r = np.asarray(rate, dtype=np.float64)
-    tt = np.asarray(t, dtype=np.float64)
+    r = as_samples(rate, "rate", finite=True)
+    tt = _as_times(t, r.shape[0])
     out = np.zeros_like(r)
     out[1:] = np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(tt)[:, None], axis=0)
     return out
@@ -565,10 +565,11 @@ def turntable_plateaus(
     are dropped).
     """
     g = _as_rate(gyro)
-    thr = 0.01 * float(min_rate) if threshold is None else float(threshold)
+    low = opt.number(min_rate, "min_rate", gt=0, hint="the slowest plateau, gyro units")
+    thr = 0.01 * low if threshold is None else opt.number(threshold, "threshold", gt=0)
     det = detect_poses(g, window=window, threshold=thr, min_separation=0.0,
                        min_windows=min_windows, max_std=10 * thr)
-    keep = [p for p in det.poses if np.linalg.norm(p.mean[:3]) >= min_rate]
+    keep = [p for p in det.poses if np.linalg.norm(p.mean[:3]) >= low]
     if not keep:
         return np.zeros((0, 3)), np.zeros(0, dtype=int)
     return np.array([p.mean[:3] for p in keep]), np.array([p.n for p in keep])
@@ -635,20 +636,18 @@ def fit_turntable(
     -------
     TurntableFit
     """
-    if model not in ("full", "axis"):
-        raise CalibrationError(f"model must be 'full' or 'axis', got {model!r}")
-    if len(recordings) != len(rates) or len(rates) == 0:
+    opt.choice(model, "model", ("full", "axis"))
+    rr_list = opt.numbers_list(rates, "rates", min_len=0, gt=0, hint="the table's rate, rad/s")
+    if (isinstance(recordings, (str, bytes)) or len(recordings) != len(rr_list)
+            or not rr_list):
         raise CalibrationError("give one rate per recording (and at least one recording)")
-    off = np.asarray(offset, dtype=np.float64).reshape(-1)
-    if off.shape != (3,) or not np.isfinite(off).all():
-        raise CalibrationError(f"offset must be 3 finite numbers, got {offset!r}")
+    off = opt.vector3(offset, "offset", hint="gyro bias, in the readings' units")
+    win = opt.integer(window, "window", ge=1, hint="samples per averaging window")
+    frac = opt.number(min_fraction, "min_fraction", gt=0, le=1)
     us, which, counts = [], [], []
-    for i, (rec, rate) in enumerate(zip(recordings, rates)):
-        rate = float(rate)
-        if not (np.isfinite(rate) and rate > 0):
-            raise CalibrationError(f"rates[{i}] must be > 0, got {rate!r}")
+    for i, (rec, rate) in enumerate(zip(recordings, rr_list)):
         g = _as_rate(rec, name=f"recordings[{i}]") - off
-        means, _ = turntable_plateaus(g, min_rate=min_fraction * rate, window=window)
+        means, _ = turntable_plateaus(g, min_rate=frac * rate, window=win)
         if len(means) == 0:
             raise CalibrationError(
                 f"recordings[{i}]: no constant-rate plateau near {rate:g}; is the table turning, "
