@@ -19,11 +19,16 @@ from .detect import (
 )
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .export import (
+    adafruit_calib_json,
+    ardupilot_parm,
     c_fixed_header,
     c_header,
     decode_motioncal,
     encode_motioncal,
+    js_module,
+    kalibr_imu_yaml,
     motioncal_packet,
+    px4_params_file,
     write_outputs,
 )
 from .fit import (
@@ -40,6 +45,9 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .io.logs import read_log
+from .io.recording import LogRecording, Stream
+from .io.tables import Table, read_table
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -65,10 +73,35 @@ from .methods.static import (
     tilt_rig,
 )
 from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .parts import (
+    fold_asa,
+    part_from_center,
+    part_from_gyro_gains,
+    part_from_temperature,
+    part_from_tilt_rig,
+)
+from .poses import PoseSettings, session_poses
 from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "PoseSettings",
+    "session_poses",
+    "fold_asa",
+    "part_from_center",
+    "part_from_gyro_gains",
+    "part_from_temperature",
+    "part_from_tilt_rig",
+    "js_module",
+    "LogRecording",
+    "Stream",
+    "adafruit_calib_json",
+    "ardupilot_parm",
+    "kalibr_imu_yaml",
+    "px4_params_file",
+    "read_log",
+    "read_table",
+    "Table",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",

@@ -6,9 +6,9 @@ For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T
 * the residual ``|calibrated| - radius``: RMS in calibrated units and in % of the radius;
 * min / max / mean / std of the calibrated norms (the seeds' "descriptive statistics");
 * the standard error of every fitted coefficient (``offset_x``... ``offdiag_yz``);
-* coverage of the sphere: the share of 100 equal-area cells (10 bands of equal height in z,
-  each cut into 10 equal longitude sectors -- by Archimedes' theorem every cell has the same
-  area) that hold at least one calibrated direction;
+* coverage of the sphere: the share of the equal-area cells of :mod:`triaxcal.coverage` (the
+  measure ``capture``, ``demo`` and ``fit`` report too) that hold at least one calibrated
+  direction, of every reading given (rejected ones too: coverage says where the board went);
 * the outliers rejected before the fit, by index;
 * warnings in plain language, each with what to do; the largest empty caps of the sphere
   (found exactly, see :mod:`triaxcal._caps`) are named by their centre and radius ("no
@@ -35,7 +35,10 @@ from . import _options as opt
 from ._caps import largest_empty_caps
 from ._validate import as_points
 from .calibration import SensorCalibration
+from .coverage import Coverage, coverage_warning, sphere_cells
+from .coverage import coverage as shared_coverage
 from .errors import CalibrationError
+from .units import per_unit
 
 __all__ = [
     "QualityReport",
@@ -49,8 +52,6 @@ __all__ = [
     "report_figure",
 ]
 
-N_BANDS = 10
-N_SECTORS = 10
 #: An empty cap of the sphere at least this wide (angular radius, degrees) is warned about.
 HOLE_DEG = 40.0
 
@@ -69,31 +70,21 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n == 0, 1.0, n)
 
 
-def coverage(
-    directions: Any, *, n_bands: int = N_BANDS, n_sectors: int = N_SECTORS
-) -> tuple[np.ndarray, float]:
-    """Hits per equal-area cell and the percentage of cells hit.
+def coverage(directions: Any) -> tuple[np.ndarray, float]:
+    """Hits per equal-area cell and the percentage of cells hit (the measure every command
+    reports: :func:`triaxcal.coverage.coverage`).
 
-    Cells: ``n_bands`` bands of equal height in ``z`` (equal area on the unit sphere) times
-    ``n_sectors`` equal longitude sectors. ``directions`` (N, 3) need not be unit length.
+    ``directions`` (N, 3) need not be unit length.
 
     Returns
     -------
-    counts : ndarray, shape (n_bands, n_sectors)
-        Readings per cell; band 0 is the bottom (-Z), sector 0 starts at longitude -180 deg.
+    counts : ndarray, shape (n_cells,)
+        Readings per cell, numbered as :class:`triaxcal.coverage.SphereCells`.
     percent : float
         Share of cells with at least one reading, in %.
     """
-    nb = opt.integer(n_bands, "n_bands", ge=1, le=1000)
-    ns = opt.integer(n_sectors, "n_sectors", ge=1, le=1000)
-    n_bands, n_sectors = nb, ns
-    u = _unit(as_points(directions, name="directions"))
-    band = np.clip(((u[:, 2] + 1.0) / 2.0 * n_bands).astype(int), 0, n_bands - 1)
-    lon = np.arctan2(u[:, 1], u[:, 0])
-    sector = np.clip(((lon + np.pi) / (2 * np.pi) * n_sectors).astype(int), 0, n_sectors - 1)
-    counts = np.zeros((n_bands, n_sectors), dtype=np.int64)
-    np.add.at(counts, (band, sector), 1)
-    return counts, 100.0 * float(np.count_nonzero(counts)) / counts.size
+    cov = shared_coverage(directions)
+    return cov.counts, cov.percent
 
 
 def empty_regions(
@@ -266,7 +257,7 @@ class QualityReport:
             lines.append("  standard errors")
             for k, v in self.stderr.items():
                 unit = (self.raw_unit if k.startswith("offset") or k == "data_radius"
-                        else f"{u}/{self.raw_unit}" if u != self.raw_unit else "(ratio)")
+                        else per_unit(u, self.raw_unit, short=True))
                 lines.append(f"    {k:<12} {v:.3g} {unit}")
         if self.rejected:
             shown = ", ".join(str(i) for i in self.rejected[:30])
@@ -359,7 +350,7 @@ def quality_report(
     radius = part.radius if part.radius is not None else float(np.mean(nk))
     res = nk - radius
     rms = float(np.sqrt(np.mean(res**2)))
-    counts, cov = coverage(cal_pts[keep])
+    cov = shared_coverage(cal_pts)  # of the session: rejected readings were visited too
     holes = empty_regions(cal_pts[keep])
     stderr = dict(part.stats.get("stderr") or {})
     if fit is not None:
@@ -380,9 +371,9 @@ def quality_report(
         norm_mean=float(nk.mean()),
         norm_std=float(nk.std(ddof=1)),
         stderr={k: float(v) for k, v in stderr.items()},
-        coverage_pct=cov,
-        cells_hit=int(np.count_nonzero(counts)),
-        cells_total=int(counts.size),
+        coverage_pct=cov.percent,
+        cells_hit=cov.cells_hit,
+        cells_total=cov.n_cells,
         empty=[(c.tolist(), a, cap_words(c, a)) for c, a in holes],
         rejected=rej,
         warnings=warnings,
@@ -402,18 +393,16 @@ def _check_sensor(sensor: Any) -> None:
 
 
 def _warnings(part: SensorCalibration, fit: Any, sensor: str | None, n: int, rej: list[int],
-              rms_pct: float, cov: float, holes: list, norms: np.ndarray) -> list[str]:
+              rms_pct: float, cov: Coverage, holes: list, norms: np.ndarray) -> list[str]:
     w: list[str] = []
     for c, ang in holes:
         w.append(
             f"the sphere has an empty cap ({cap_words(c, ang)}): {_hole_action(sensor, c)}, "
             "then fit again"
         )
-    if cov < 50:
-        w.append(
-            f"only {cov:.0f} % of the sphere is covered: tumble the board through many more "
-            "orientations (all six faces up and the corners in between)"
-        )
+    low = coverage_warning(cov, sensor)
+    if low:
+        w.append(low)
     if n - len(rej) < 30:
         w.append(
             f"only {n - len(rej)} readings were used: collect at least 30 (better 100+) spread "
@@ -650,24 +639,24 @@ def report_figure(
 
     # coverage map: Lambert cylindrical equal-area (x = longitude, y = z), cells are rectangles
     ax = fig.add_subplot(gs[2, 1])
-    cu = _unit(c[keep])
+    cu = _unit(c)  # every reading, as the coverage number
     counts, _ = coverage(cu)
-    lon_edges = np.linspace(-180, 180, N_SECTORS + 1)
-    z_edges = np.linspace(-1, 1, N_BANDS + 1)
-    shown = np.where(counts > 0, np.log1p(counts), np.nan)
     import matplotlib.colors as mcolors
-    from matplotlib.patches import Patch
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.patches import Patch, Rectangle
 
-    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="#d9d9d9")
+    cmap = matplotlib.colormaps["viridis"]
     top = int(counts.max()) if counts.size else 1
-    mesh = ax.pcolormesh(lon_edges, z_edges, np.ma.masked_invalid(shown), cmap=cmap,
-                         norm=mcolors.Normalize(vmin=math.log1p(1),
-                                                vmax=max(math.log1p(top), math.log1p(2))),
-                         edgecolors="white", linewidth=0.6)
+    cnorm = mcolors.Normalize(vmin=math.log1p(1), vmax=max(math.log1p(top), math.log1p(2)))
+    for n_hits, (lo, hi, z_lo, z_hi) in zip(counts.tolist(), sphere_cells().rectangles()):
+        face = "#d9d9d9" if n_hits == 0 else cmap(cnorm(math.log1p(n_hits)))
+        for shift in (0.0, -360.0):  # a cell that runs past +180 deg shows on both edges
+            ax.add_patch(Rectangle((lo + shift, z_lo), hi - lo, z_hi - z_lo, facecolor=face,
+                                   edgecolor="white", linewidth=0.6))
     ticks = [t for t in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
              if t <= max(top, 1)]
-    cbar = fig.colorbar(mesh, ax=ax, ticks=[math.log1p(t) for t in ticks], pad=0.02,
-                        fraction=0.06)
+    cbar = fig.colorbar(ScalarMappable(norm=cnorm, cmap=cmap), ax=ax,
+                        ticks=[math.log1p(t) for t in ticks], pad=0.02, fraction=0.06)
     cbar.ax.set_yticklabels([str(t) for t in ticks])
     cbar.set_label("readings per cell")
     ax.scatter(np.degrees(np.arctan2(cu[:, 1], cu[:, 0])), cu[:, 2], s=4, c="k", alpha=0.5)

@@ -9,6 +9,7 @@ from ..errors import CalibrationError
 from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
+from ._poses import add_pose_options, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 
@@ -83,23 +84,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-mode-byte", action="store_true",
                    help="do not send the mode byte (P/B/F/T/R) that switches the firmware to "
                         "the protocol; for boards that stream by themselves")
-    p.add_argument("--window", type=_positive_int, default=25, metavar="N",
-                   help="pose detection: samples per averaging window (default 25)")
-    p.add_argument("--hold", type=_positive_int, default=4, metavar="W",
-                   help="pose detection: steady windows before a pose registers (default 4)")
-    p.add_argument("--counts-per-g", type=float, default=None, metavar="C",
-                   help="accelerometer units per g, for pose detection (default 16384; 8192 "
-                        "for raw; 1 if a text board prints g)")
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
+    add_pose_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.poll_hz is not None and not args.poll_hz > 0:
         raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
-    if args.counts_per_g is not None and not args.counts_per_g > 0:
-        raise CalibrationError(f"--counts-per-g must be > 0, got {args.counts_per_g}")
     channels = args.channels
     if channels is None and args.protocol != "raw":
         channels = 10
@@ -131,9 +124,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.seconds,
         mode=mode,
         columns=names,
-        units_per_g=args.counts_per_g,
-        window=args.window,
-        hold_windows=args.hold,
+        detection=settings_from_args(args),
         progress=None if args.quiet else out,
         bell=not args.no_bell,
     )
@@ -143,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
            "poses": "pose count reached", "duration": "time is up", "stop": "stopped"}
     print(
         f"triaxcal capture: {why[result.stopped_by]}: {result.samples} rows, "
-        f"{len(result.poses)} poses, sphere {100 * result.coverage:.0f}% covered, saved to "
+        f"{len(result.poses)} poses, coverage {100 * result.coverage:.0f} %, saved to "
         f"{result.path} ({result.elapsed_s:.1f} s; dropped frames {d.dropped_frames}, "
         f"skipped lines {d.lines_skipped}, lost by sequence {d.lost_frames}, "
         f"reconnects {st.reconnects})",
