@@ -479,10 +479,47 @@ PART_FIELDS: dict[str, Field] = {
     "input_sha256": Field(optional(sha256_hex)),
     "source": Field(optional(SOURCE_TEXT)),
     "stats": Field(optional(stats_object)),
+    # checked in full by triaxcal.field.ExpectedField and triaxcal.rotations.Alignment
+    "expected_field": Field(optional(json_object)),
+    "alignment": Field(optional(json_object)),
 }
 
 SENSOR_ID_TEXT = text(256)
 STAMP_TEXT = text(64)
+
+#: Most summaries of replaced calibrations a part keeps (newest first).
+MAX_PREVIOUS = 10
+
+
+def _vec3_list(value: Any, what: str) -> list[float]:
+    return [float(x) for x in vec3(value, what)]
+
+
+#: One summary of a calibration that a newer one replaced (a part's ``previous`` list).
+SUMMARY_FIELDS: dict[str, Field] = {
+    "replaced_utc": Field(STAMP_TEXT, required=True),
+    "created_utc": Field(optional(STAMP_TEXT)),
+    "raw_unit": Field(UNIT_TEXT, required=True),
+    "unit": Field(UNIT_TEXT, required=True),
+    "offset": Field(_vec3_list, required=True),
+    "diag": Field(_vec3_list, required=True),
+    "offdiag": Field(_vec3_list, required=True),
+    "offdiag_lower": Field(optional(_vec3_list)),
+    "radius": Field(optional(positive)),
+    "model": Field(optional(model_name)),
+    "stderr": Field(_stderr),
+    "rms": Field(nonnegative),
+    "n": Field(integer),
+    "input_sha256": Field(optional(sha256_hex)),
+    "source": Field(optional(SOURCE_TEXT)),
+}
+
+
+def summary(value: Any, what: str) -> dict[str, Any]:
+    return check_fields(value, SUMMARY_FIELDS, what)
+
+
+PART_FIELDS["previous"] = Field(optional(list_of(summary, max_items=10 * MAX_PREVIOUS)))
 
 TOP_FIELDS: dict[str, Field] = {
     "schema": Field(text(64), required=True),

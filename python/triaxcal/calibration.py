@@ -14,6 +14,15 @@ The JSON file (``"schema": "triaxcal.calibration/1"``) keeps the autopilots' par
 ``offset``, ``diag``, ``offdiag`` (``[xy, xz, yz]``, the upper triangle; a non-symmetric matrix
 adds ``offdiag_lower`` ``[yx, zx, zy]``) and ``radius``. Floats are written with ``repr`` (the
 shortest text that reads back to the same double), so ``load(save(cal)) == cal`` exactly.
+
+A part that replaced an earlier calibration of the same sensor keeps a ``previous`` list of
+summaries (newest first, at most :data:`MAX_PREVIOUS`): when it was replaced, the coefficients,
+units, standard errors and provenance -- enough for ``triaxcal diff`` to say what changed.
+
+A magnetometer part may also hold the field the World Magnetic Model expects where it was
+calibrated (``expected_field``, :class:`triaxcal.field.ExpectedField`) and its alignment with
+the accelerometer (``alignment``, :class:`Alignment`: ``v_accel = rotation @ v_mag`` for
+calibrated readings; :meth:`SensorCalibration.apply_aligned`).
 """
 
 from __future__ import annotations
@@ -34,12 +43,15 @@ from . import _schema
 from ._core import __version__
 from ._validate import as_points
 from .errors import CalibrationError
+from .field import ExpectedField
 from .io.files import read_bounded, write_file
+from .rotations import Alignment
 
 __all__ = [
     "KNOWN_MODELS",
     "SCHEMA",
     "SENSORS",
+    "Alignment",
     "Calibration",
     "SensorCalibration",
     "TemperatureTerms",
@@ -52,6 +64,9 @@ SCHEMA = f"{SCHEMA_NAME}/{SCHEMA_VERSION}"
 SENSORS = ("accel", "gyro", "mag")
 #: Model names a part may carry (see :mod:`triaxcal._schema`).
 KNOWN_MODELS = _schema.KNOWN_MODELS
+
+#: Most summaries of replaced calibrations a part keeps (newest first).
+MAX_PREVIOUS = _schema.MAX_PREVIOUS
 
 _AXES = ("x", "y", "z")
 _UPPER = ((0, 1), (0, 2), (1, 2))  # xy, xz, yz
@@ -78,6 +93,11 @@ def sha256_points(points: Any) -> str:
 def _jsonable(value: Any, what: str) -> Any:
     """Deep-copy ``value`` into plain JSON types (dict/list/str/float/int/bool/None)."""
     return _schema.json_value(value, what)
+
+
+def _summary(d: Any, what: str) -> dict[str, Any]:
+    """A validated, plain-JSON copy of one ``previous`` summary (see the module docstring)."""
+    return _schema.summary(d, what)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +169,6 @@ def _horner(poly: np.ndarray, dt: np.ndarray) -> np.ndarray:
         acc = acc * dt + row
     return acc
 
-
 @dataclass(frozen=True, eq=False)
 class SensorCalibration:
     """Calibration of one three-axis sensor: ``calibrated = (raw - offset) @ matrix.T``.
@@ -177,6 +196,14 @@ class SensorCalibration:
         SHA-256 of the input data (see :func:`sha256_points`), for provenance.
     source : str, optional
         Where the data came from (a file name), for provenance.
+    previous : tuple of dict
+        Summaries of the calibrations of this sensor that this one replaced, newest first (see
+        :meth:`with_previous`).
+    expected_field : ExpectedField, optional
+        The field the World Magnetic Model expects where the part was calibrated (magnetometer).
+    alignment : Alignment, optional
+        Rotation of this part's calibrated frame into another part's (magnetometer into
+        accelerometer); :meth:`apply_aligned` applies it.
     """
 
     offset: np.ndarray
@@ -189,6 +216,9 @@ class SensorCalibration:
     stats: dict[str, Any] = field(default_factory=dict)
     input_sha256: str | None = None
     source: str | None = None
+    previous: tuple[dict[str, Any], ...] = ()
+    expected_field: ExpectedField | None = None
+    alignment: Alignment | None = None
 
     def __post_init__(self) -> None:
         f = _schema.PART_FIELDS
@@ -203,6 +233,20 @@ class SensorCalibration:
         if not isinstance(self.stats, Mapping):
             raise CalibrationError(f"stats must be a mapping, got {type(self.stats).__name__}")
         object.__setattr__(self, "stats", _schema.stats_object(dict(self.stats), "stats"))
+        prev = self.previous
+        if isinstance(prev, (str, bytes, Mapping)) or not isinstance(prev, (list, tuple)):
+            raise CalibrationError("previous must be a list of summaries (newest first)")
+        if len(prev) > 10 * MAX_PREVIOUS:
+            raise CalibrationError(f"previous holds {len(prev)} summaries; at most "
+                                   f"{MAX_PREVIOUS} are kept")
+        object.__setattr__(self, "previous", tuple(
+            _summary(p, f"previous[{i}]") for i, p in enumerate(prev)))
+        if self.expected_field is not None and not isinstance(self.expected_field,
+                                                              ExpectedField):
+            object.__setattr__(self, "expected_field",
+                               ExpectedField.from_dict(self.expected_field))
+        if self.alignment is not None and not isinstance(self.alignment, Alignment):
+            object.__setattr__(self, "alignment", Alignment.from_dict(self.alignment))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod
@@ -390,6 +434,24 @@ class SensorCalibration:
         out = d @ self.matrix.T
         return out[0] if single else out
 
+    def apply_aligned(self, raw: Any, temperature: Any = None) -> np.ndarray:
+        """Calibrate, then turn into the aligned frame: ``apply(raw) @ alignment.rotation.T``.
+
+        Raises :class:`CalibrationError` when the part has no alignment.
+        """
+        if self.alignment is None:
+            raise CalibrationError(
+                "this part has no alignment: fit one with tc.align_mag_accel (or `triaxcal fit "
+                "--sensor mag --align`), or use apply()")
+        out = self.apply(raw, temperature=temperature)
+        return out @ self.alignment.rotation.T
+
+    def replace(self, **changes: Any) -> SensorCalibration:
+        """A copy with some fields changed (e.g. ``part.replace(alignment=None)``)."""
+        import dataclasses
+
+        return dataclasses.replace(self, **changes)
+
     @property
     def diag(self) -> np.ndarray:
         """Diagonal of ``matrix`` (per-axis gain), calibrated units per raw unit."""
@@ -404,6 +466,63 @@ class SensorCalibration:
     def symmetric(self) -> bool:
         """Whether ``matrix`` is exactly symmetric (as every ellipsoid fit returns)."""
         return all(self.matrix[i, j] == self.matrix[j, i] for i, j in _UPPER)
+
+    # -- history --------------------------------------------------------------------------
+    def summary(self, *, replaced_utc: str | None = None, created_utc: str = "") -> dict[str, Any]:
+        """What ``previous`` keeps of this part once it is replaced: coefficients, units,
+        standard errors, residual RMS and provenance (no temperature terms, no history)."""
+        d: dict[str, Any] = {
+            "replaced_utc": replaced_utc or _now_utc(),
+            "created_utc": created_utc,
+            "raw_unit": self.raw_unit,
+            "unit": self.unit,
+            "offset": self.offset.tolist(),
+            "diag": self.diag.tolist(),
+            "offdiag": self.offdiag.tolist(),
+        }
+        if not self.symmetric:
+            d["offdiag_lower"] = [float(self.matrix[i, j]) for i, j in _LOWER]
+        d["radius"] = self.radius
+        d["model"] = self.model
+        for k in ("stderr", "rms", "n"):
+            if k in self.stats:
+                d[k] = self.stats[k]
+        d["input_sha256"] = self.input_sha256
+        d["source"] = self.source
+        return _summary(d, "summary")
+
+    def with_previous(self, old: SensorCalibration, *, created_utc: str = "",
+                      replaced_utc: str | None = None) -> SensorCalibration:
+        """This part, remembering that it replaced ``old`` (whose file was created at
+        ``created_utc``): ``old``'s summary, then ``old``'s own history, newest first, at most
+        :data:`MAX_PREVIOUS`."""
+        hist = (old.summary(replaced_utc=replaced_utc, created_utc=created_utc),
+                *old.previous)
+        fields = {k: getattr(self, k) for k in ("offset", "matrix", "raw_unit", "unit",
+                                                "radius", "model", "temperature", "stats",
+                                                "input_sha256", "source")}
+        return SensorCalibration(**fields, previous=hist[:MAX_PREVIOUS])
+
+    def previous_part(self, index: int = 0) -> SensorCalibration:
+        """The replaced calibration ``previous[index]`` as a part (its standard errors, RMS and
+        reading count in ``stats``), e.g. to compare with this one."""
+        if not 0 <= index < len(self.previous):
+            raise CalibrationError(
+                f"this part keeps {len(self.previous)} earlier calibration(s); no "
+                f"previous[{index}]"
+            )
+        p = self.previous[index]
+        m = np.diag(p["diag"])
+        lower = p.get("offdiag_lower") or p["offdiag"]
+        for k, (i, j) in enumerate(_UPPER):
+            m[i, j] = p["offdiag"][k]
+            m[j, i] = lower[k]
+        return SensorCalibration(
+            offset=p["offset"], matrix=m, raw_unit=p["raw_unit"], unit=p["unit"],
+            radius=p.get("radius"), model=p.get("model"),
+            stats={k: p[k] for k in ("stderr", "rms", "n") if k in p},
+            input_sha256=p.get("input_sha256"), source=p.get("source"),
+        )
 
     # -- JSON -----------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -423,6 +542,12 @@ class SensorCalibration:
         d["input_sha256"] = self.input_sha256
         d["source"] = self.source
         d["stats"] = self.stats
+        if self.previous:
+            d["previous"] = [dict(p) for p in self.previous]
+        if self.expected_field is not None:
+            d["expected_field"] = self.expected_field.to_dict()
+        if self.alignment is not None:
+            d["alignment"] = self.alignment.to_dict()
         return d
 
     @classmethod
@@ -450,6 +575,9 @@ class SensorCalibration:
                 stats=v.get("stats") or {},
                 input_sha256=v.get("input_sha256"),
                 source=v.get("source"),
+                previous=v.get("previous") or (),
+                expected_field=v.get("expected_field"),
+                alignment=v.get("alignment"),
             )
         except CalibrationError as exc:
             raise CalibrationError(f"{what}: {exc}") from None
@@ -526,6 +654,11 @@ class Calibration:
                 )
         if not any(getattr(self, s) is not None for s in SENSORS):
             raise CalibrationError("a Calibration needs at least one of accel, gyro, mag")
+        for name in SENSORS:
+            part = getattr(self, name)
+            if part is not None and part.alignment is not None and part.alignment.to == name:
+                raise CalibrationError(f"{name}.alignment.to is {name}: a part cannot be aligned "
+                                       "to itself")
         for name in ("sensor_id", "created_utc", "library_version"):
             _schema.TOP_FIELDS[name].check(getattr(self, name), name)
         if not isinstance(self.extra, Mapping):

@@ -15,7 +15,7 @@ from ._help import PlainHelpFormatter
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ("demo", "capture", "fit", "export", "report", "send", "sphere_center", "tilt_rig",
-            "gyro_gains", "temperature")
+            "gyro_gains", "temperature", "noise", "diff")
 
 
 def build_parser() -> argparse.ArgumentParser:

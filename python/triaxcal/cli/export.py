@@ -77,6 +77,9 @@ def register(subparsers: Any) -> None:
                         "gyroscope_random_walk")
     g.add_argument("--kalibr-model", default="scale-misalignment",
                    choices=("scale-misalignment", "calibrated"), help="kalibr: IMU model")
+    p.add_argument("--no-alignment", action="store_true",
+                   help="leave the magnetometer-to-accelerometer alignment out on purpose (for "
+                        "a format that cannot hold it: motioncal, or a non-right-angle one)")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
                    help="file to write (replaced whole; its folder must exist)")
     p.set_defaults(func=run)
@@ -151,6 +154,8 @@ def _param_options(args: argparse.Namespace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     out = check_output(args.output, "export")
     cal = Calibration.load(args.calibration)
+    if getattr(args, "no_alignment", False):
+        cal = cal.replace(**{s: cal.part(s).replace(alignment=None) for s in cal.sensors})
     if out.resolve() == Path(args.calibration).resolve():
         raise CalibrationError("-o must differ from the calibration file")
     export(cal, args.fmt, out, prefix=args.prefix,

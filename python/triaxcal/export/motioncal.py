@@ -13,6 +13,7 @@ from typing import Any
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..io.motioncal import encode_motioncal
+from ..rotations import rotation_angle_deg
 from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
 
 __all__ = ["motioncal_packet"]
@@ -62,6 +63,14 @@ def motioncal_packet(
         k, u = _driver_scale(cal.gyro, "gyro", counts_per_unit)
         kw["gyro_offset"] = cal.gyro.offset * k * unit_factor(u, "rad/s")
     if cal.mag is not None:
+        al = cal.mag.alignment
+        if al is not None and rotation_angle_deg(al.rotation) > 0.01:
+            raise CalibrationError(
+                "the MotionCal packet holds a symmetric soft-iron matrix and no rotation; this "
+                f"magnetometer is aligned to the {al.to} by {rotation_angle_deg(al.rotation):.2f}"
+                " deg: export --format adafruit (its soft-iron matrix holds the rotation) or c, "
+                "or drop the alignment on purpose (--no-alignment; cal.mag.replace("
+                "alignment=None))")
         k, u = _driver_scale(cal.mag, "mag", counts_per_unit)
         ku = k * unit_factor(u, "uT")  # uT per raw unit, as the driver sees it
         # calibrated units -> uT (a part left in raw counts is scaled like the driver)
