@@ -151,17 +151,14 @@ def test_sphere_center_on_a_wedge(tmp_path, capsys):
 
 
 def test_sphere_center_fit_method(section, tmp_path, capsys):
-    import inspect
-
     argv = ("sphere-center", section / "globe.csv", "--radius", "16384", "--method", "fit",
             "-o", tmp_path / "f.json")
-    if "scale" in inspect.signature(tc.fit_sphere).parameters:
-        _run(capsys, *argv)
-        part = tc.Calibration.load(tmp_path / "f.json").accel
-        np.testing.assert_allclose(part.offset, GLOBE_OFFSET, atol=3.0)
-        assert part.stats["method"] == "fit"
-    else:  # the fixed-radius sphere fit is not in this build: a clear message
-        assert "fit_sphere(points, radius=R, scale='fixed')" in _fails(capsys, *argv)
+    _run(capsys, *argv)
+    part = tc.Calibration.load(tmp_path / "f.json").accel
+    np.testing.assert_allclose(part.offset, GLOBE_OFFSET, atol=3.0)
+    assert part.stats["method"] == "fit"
+    assert set(part.stats["stderr"]) == {"offset_x", "offset_y", "offset_z"}
+    assert all(0 < v < 3 for v in part.stats["stderr"].values())
 
 
 def test_sphere_center_scales_and_units(section, tmp_path, capsys):

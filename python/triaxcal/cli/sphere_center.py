@@ -154,18 +154,12 @@ def centre(pts: np.ndarray, r: float, args: Any) -> tuple[np.ndarray, dict[str, 
             half, step = step, max(step / 20.0, min_step)
         return c, {"iterations": passes, "evaluations": evaluations, "step": step,
                    "half_width": hw, "grid_center": mid.tolist()}
-    try:
-        f = fit_sphere(pts, radius=r, scale="fixed")  # type: ignore[call-arg]
-    except TypeError:  # a triaxcal without the fixed-scale sphere fit
-        raise CalibrationError(
-            "--method fit needs fit_sphere(points, radius=R, scale='fixed'), which this "
-            "triaxcal lacks: use --method descent"
-        ) from None
+    f = fit_sphere(pts, radius=r, scale="fixed")  # the centre only, |p - c| = R
     if not f.converged:
         raise CalibrationError("the fixed-radius sphere fit did not converge: try --method "
                                "descent")
-    return np.asarray(f.offset), {"iterations": f.iterations,
-                                  "stderr": [float(v) for v in f.stderr[:3]]}
+    return np.asarray(f.offset), {"iterations": f.iterations, "stderr": {
+        name: float(v) for name, v in zip(f.param_names[:3], f.stderr[:3])}}
 
 
 def run(args: argparse.Namespace) -> int:
