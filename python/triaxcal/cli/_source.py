@@ -86,7 +86,8 @@ def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Sour
         table = read_table(p, skip_bad_lines=bool(getattr(args, "skip_bad_lines", False)))
         cols = pick_columns(table, getattr(args, "columns", None), sensor)
         pose_stats: dict[str, Any] = {}
-        if getattr(args, "poses", False):  # the capture's pose detection, every sensor
+        board = table.names is not None and "pose_n" in table.names  # rows are pose means
+        if getattr(args, "poses", False) or board:  # the capture's pose detection, every sensor
             pts, pose_stats = pose_points(table, cols, settings_from_args(args))
         else:
             pts = table.data[:, cols]
