@@ -474,3 +474,21 @@ def test_pose_settings_packet_is_checked(board):
     check_consistent(rows)
     board.port.write(BoardPoseSettings().packet())  # back to the defaults
     board.quiet()
+
+
+ARDUINO_AVR = Path("/usr/share/arduino/hardware/arduino/avr")
+
+
+@pytest.mark.skipif(not (ARDUINO_AVR / "cores" / "arduino" / "Arduino.h").is_file() or
+                    bool(MISSING), reason="no Arduino AVR core: apt-get install arduino-core-avr "
+                    "(make deps)")
+def test_arduino_sketch_compiles(tmp_path):
+    """The sketch (with the still-pose mode and tone() on D8) builds against the Arduino AVR
+    core, MPU-6050 and simulated, with the shared C files' warnings as errors. (It cannot run
+    in QEMU: the Arduino core keeps time with Timer0, which QEMU's arduino-uno lacks.)"""
+    proc = subprocess.run(["make", "-C", str(FIRMWARE), f"BUILD={tmp_path}", "arduino-check"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    for sim in (0, 1):
+        assert (tmp_path / "sketch" / f"triaxcal_stream-sim{sim}.elf").is_file()
+    assert proc.stdout.count("Program:") == 2
