@@ -424,6 +424,7 @@ def read_poses(board: Board, dec: BoardPoseDecoder, until, timeout_s: float = 60
     return poses
 
 
+@pytest.mark.slow
 def test_without_the_gyro_the_twists_at_the_pole_merge(board):
     """The 12 twists at the south pole look alike to the accelerometer: with the gyro taking no
     part (threshold 0) the board registers them as one pose, and the next pose it registers is
@@ -479,6 +480,7 @@ def test_pose_settings_packet_is_checked(board):
 ARDUINO_AVR = Path("/usr/share/arduino/hardware/arduino/avr")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not (ARDUINO_AVR / "cores" / "arduino" / "Arduino.h").is_file() or
                     bool(MISSING), reason="no Arduino AVR core: apt-get install arduino-core-avr "
                     "(make deps)")

@@ -12,7 +12,7 @@ static uint8_t have_prev;
 
 static int32_t bias[3]; /* gyro: a still window's sums */
 static uint8_t bias_known;
-static uint8_t reanchor; /* steady-but-off-bias windows in a row (before the first pose) */
+static uint8_t reanchor; /* steady windows in a row with the gyro a little off its bias */
 
 static uint8_t armed;   /* moved since the last pose (or no pose yet) */
 static uint8_t settled; /* the first steady window after a move was seen (not averaged) */
@@ -105,7 +105,7 @@ static uint8_t window_done(void)
     const int32_t thr_a = (int32_t)set.accel_threshold * set.window;
     const int32_t thr_g = (int32_t)set.gyro_threshold * set.window;
     const uint8_t gyro = set.gyro_threshold != 0;
-    uint8_t moved = !have_prev; /* the first window has nothing to compare with */
+    uint8_t moved = !have_prev; /* not averaged; the first window has nothing to compare with */
     uint8_t g_steady = have_prev; /* the gyro mean changed by at most the threshold */
     uint8_t i, ev = STILL_EV_WINDOW;
 
@@ -113,6 +113,11 @@ static uint8_t window_done(void)
         if (abs32(win[i] - prev[i]) > thr_a) moved = 1;
         if (abs32(win[3 + i] - prev[3 + i]) > thr_g) g_steady = 0;
     }
+    /* A move, which allows the next pose: the accelerometer changed, the gyro rate changed, or
+     * the gyro is far off its bias. A gyro only a little off its bias but unchanging (a drift)
+     * is not averaged, but is no move: the pose after it would be the same pose again. */
+    uint8_t arm = moved;
+    if (gyro && !g_steady) arm = 1;
     if (gyro) {
         if (!bias_known) {
             if (moved || !g_steady) {
@@ -122,25 +127,28 @@ static uint8_t window_done(void)
                 bias_known = 1;
             }
         } else {
-            uint8_t off = 0;
+            uint8_t off = 0, near = 1;
             for (i = 0; i < 3; i++) {
-                if (abs32(win[3 + i] - bias[i]) > thr_g) off = 1;
+                int32_t away = abs32(win[3 + i] - bias[i]);
+                if (away > thr_g) off = 1;
+                if (away > STILL_REANCHOR_MAX * thr_g) near = 0;
             }
-            if (off && !moved && g_steady && status.poses == 0 &&
-                ++reanchor >= STILL_REANCHOR_WINDOWS) {
-                /* the bias was taken while the board turned: adopt the steady rate */
+            if (off && near && !moved && g_steady && ++reanchor >= STILL_REANCHOR_WINDOWS) {
+                /* steady for a while, a little off: the bias moved (or was taken while the
+                 * board turned), follow it -- the host's detector does the same */
                 for (i = 0; i < 3; i++) bias[i] = win[3 + i];
                 off = 0;
             }
-            if (!off || moved || !g_steady) reanchor = 0;
+            if (!off || !near || moved || !g_steady) reanchor = 0;
             if (off) moved = 1;
+            if (!near) arm = 1;
         }
     }
     for (i = 0; i < 6; i++) prev[i] = win[i];
     have_prev = 1;
 
+    if (arm) armed = 1;
     if (moved) {
-        armed = 1;
         settled = 0;
         status.run = 0;
     } else if (holdoff_left) {

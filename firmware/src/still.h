@@ -9,14 +9,18 @@
  *     (the gyro's mean over the last steady window): a turn, which the accelerometer cannot see
  *     when it is about the vertical (the 12 twists at each pole of the globe scheme).
  * Until the bias is known (the first windows), a window whose gyro mean changed by at most the
- * threshold from the previous one sets it; if the gyro then stays off the bias but unchanging
- * for STILL_REANCHOR_WINDOWS steady windows (the bias was taken while the board turned), that
- * mean becomes the bias.
+ * threshold from the previous one sets it; it is then the gyro mean of the last window of each
+ * registered pose. If the gyro stays off the bias by less than STILL_REANCHOR_MAX thresholds
+ * but unchanging for STILL_REANCHOR_WINDOWS windows the accelerometer calls steady (the bias
+ * drifted, or was taken while the board turned), that mean becomes the bias (the host's
+ * detector, triaxcal.detect, does the same).
  * After a move, the first steady window is not averaged (it may hold the end of the move);
  * the next `hold_windows` steady windows are, and then the pose is registered: its sums and
  * sample count are sent, the buzzer beeps, and for `holdoff_ms` no pose is averaged (the
  * seed's 2 s to let go of the board). Motion is still watched during the hold-off. A pose is
- * registered once: the next one needs the board to have moved since.
+ * registered once: the next one needs a move since -- the accelerometer's or the gyro's
+ * window mean changed by more than its threshold, or the gyro is more than STILL_REANCHOR_MAX
+ * thresholds off its bias (a gyro a little off but unchanging is a drift, not a move).
  */
 #ifndef TRIAXCAL_STILL_H
 #define TRIAXCAL_STILL_H
@@ -31,6 +35,7 @@ extern "C" {
 #define STILL_SETTINGS_VERSION 1
 #define STILL_SETTINGS_BYTES 10 /* the wire form of struct still_settings */
 #define STILL_REANCHOR_WINDOWS 8
+#define STILL_REANCHOR_MAX 16
 #define STILL_STATUS_MS 100 /* a status frame at most this often (and after each pose) */
 
 /* Defaults: the seed's 0.07 g and 2 s at 100 samples per second. */
