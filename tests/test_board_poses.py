@@ -287,6 +287,27 @@ def test_capture_board_poses_then_fit(tmp_path, capsys):
     assert main(["report", str(tmp_path / "cal0.json")]) == 0
 
 
+def test_several_boards_find_their_poses(tmp_path, capsys):
+    boards = [FakeBoard(sphere_poses([10 * i, 0, 0], [16384] * 3)[:5]) for i in range(2)]
+    try:
+        rc = main(["capture", *[a for b in boards for a in ("--port", b.port)], "--protocol",
+                   "framed", "--board-poses", "--poses", "5", "--seconds", "30", "--no-id",
+                   "--out-dir", str(tmp_path / "sessions"), "--quiet"])
+    finally:
+        for b in boards:
+            b.close()
+    assert rc == 0, capsys.readouterr().err
+    files = sorted((tmp_path / "sessions").glob("*.csv"))
+    assert len(files) == 2
+    for b in boards:
+        assert b.settings == BoardPoseSettings(holdoff_ms=0)
+    for f in files:
+        cols, data = read_session(f)
+        assert cols[-1] == POSE_N_COLUMN and data.shape == (5, 9)
+    assert sorted(read_session(f)[1][0, 1] for f in files) == \
+        pytest.approx([-16384 / 3 ** 0.5, 10 - 16384 / 3 ** 0.5], abs=0.01)
+
+
 def test_capture_warns_when_the_board_keeps_other_settings(tmp_path, capsys):
     board = FakeBoard(sphere_poses([0, 0, 0], [16384] * 3)[:3], refuse=True)
     try:

@@ -78,7 +78,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(MotionCal Raw: lines)")
     p.add_argument("--channels", type=_positive_int, default=None, metavar="K",
                    help="values per record (default 10: ax ay az gx gy gz mx my mz temp; "
-                        "7 for the AVR firmware; raw is always 9)")
+                        "7 for the AVR firmware, the default with --board-poses; raw is "
+                        "always 9)")
     p.add_argument("--request-byte", type=_request_byte, default=b"!", metavar="BYTE",
                    help="request byte of polled binary (default 0x21, '!')")
     p.add_argument("--poll-hz", type=float, default=None, metavar="HZ",
@@ -161,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
         channels = 7 if channels is None else channels
     elif channels is None and args.protocol != "raw":
         channels = 10
+    args.board_settings = board
     if args.out_dir is not None or len(args.port) > 1:
         from ._multicapture import run_many
 
