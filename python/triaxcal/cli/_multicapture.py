@@ -40,6 +40,7 @@ def run_many(args: argparse.Namespace, channels: int | None) -> int:
             "request_byte": args.request_byte,
             "switch_mode": not args.no_mode_byte,
             "poll_interval_s": 1.0 / args.poll_hz if args.poll_hz else 0.0,
+            "board_poses": getattr(args, "board_settings", None),
         },
         samples=args.samples,
         poses=args.poses,

@@ -75,7 +75,8 @@ def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
 
     cols = pick_columns(table, getattr(args, "columns", None), sensor)
     pose_stats: dict[str, Any] = {}
-    if getattr(args, "poses", False):  # the capture's pose detection, every sensor
+    board = table.names is not None and "pose_n" in table.names  # rows are pose means
+    if getattr(args, "poses", False) or board:  # the capture's pose detection, every sensor
         pts, pose_stats = pose_points(table, cols, settings_from_args(args))
     else:
         pts = table.data[:, cols]

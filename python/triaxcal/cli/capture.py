@@ -6,7 +6,8 @@ import argparse
 import sys
 
 from ..errors import CalibrationError
-from ..io.capture import capture, channel_names
+from ..io.board_poses import BoardPoseSettings
+from ..io.capture import POSE_N_COLUMN, capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
 from ._poses import add_pose_options, settings_from_args
@@ -19,8 +20,18 @@ still pose rings the bell, and the status line says which way to turn next. Ctrl
 with everything saved. The session CSV has a header 't,<channels>' and one row per record:
 host time in seconds, then the values as received (counts).
 
+With --board-poses the board finds the poses itself (the triaxcal firmware's mode S: the
+seed's window method, run on the board, with the gyro watching for turns) and sends one mean
+per pose; each becomes a row of the session, with a last column pose_n (samples averaged),
+and beeps its buzzer. The pose-detection options below are sent to the board (in its
+counts: --counts-per-g, default 16384, turns --accel-threshold into counts; --gyro-threshold
+auto is the firmware's 393 counts = 3 deg/s; --rate-hz sets its sample rate, default 100).
+triaxcal fit takes such rows as the poses they are.
+
 examples:
   triaxcal capture --port /dev/ttyUSB0 --protocol framed --poses 30 --out s.csv
+  triaxcal capture --port /dev/ttyACM0 --protocol framed --channels 7 --board-poses \
+      --holdoff 2 --poses 84 --out globe.csv
   triaxcal capture --port /dev/ttyACM0 --protocol binary --channels 7 --out s.csv
   triaxcal capture --port COM3 --protocol raw --samples 5000 --out s.csv
 
@@ -67,7 +78,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(MotionCal Raw: lines)")
     p.add_argument("--channels", type=_positive_int, default=None, metavar="K",
                    help="values per record (default 10: ax ay az gx gy gz mx my mz temp; "
-                        "7 for the AVR firmware; raw is always 9)")
+                        "7 for the AVR firmware, the default with --board-poses; raw is "
+                        "always 9)")
     p.add_argument("--request-byte", type=_request_byte, default=b"!", metavar="BYTE",
                    help="request byte of polled binary (default 0x21, '!')")
     p.add_argument("--poll-hz", type=float, default=None, metavar="HZ",
@@ -98,18 +110,59 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-mode-byte", action="store_true",
                    help="do not send the mode byte (P/B/F/T/R) that switches the firmware to "
                         "the protocol; for boards that stream by themselves")
+    p.add_argument("--board-poses", action="store_true",
+                   help="framed: the board detects the still poses itself and sends one mean "
+                        "per pose (firmware mode S); the session gets one row per pose")
+    p.add_argument("--beep-ms", type=int, default=100, metavar="MS",
+                   help="--board-poses: length of the board's beep on each pose, 0..250 ms "
+                        "(default 100; 0: silent)")
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
     add_pose_options(p)
     p.set_defaults(func=run)
 
 
+def board_settings(args: argparse.Namespace) -> BoardPoseSettings:
+    """The board's pose settings from the pose-detection options, in the board's units."""
+    if args.hold is None:
+        raise CalibrationError("--board-poses needs --hold W: the board registers a pose after "
+                               "W steady windows")
+    if args.mag_threshold not in ("auto", "off"):
+        raise CalibrationError("--board-poses: the board's pose mode has no magnetometer; drop "
+                               "--mag-threshold")
+    per_g = 16384.0 if args.counts_per_g is None else float(args.counts_per_g)
+    rate = 100.0 if args.rate_hz is None else float(args.rate_hz)
+    period = 1000.0 / rate
+    if abs(period - round(period)) > 1e-9 or not 1 <= round(period) <= 250:
+        raise CalibrationError(f"--board-poses: --rate-hz {rate:g} is not 1000 / a whole number "
+                               "of milliseconds from 1 to 250 (e.g. 100, 200, 500, 1000)")
+    thr = args.gyro_threshold
+    gyro = 393 if thr == "auto" else 0 if thr == "off" else int(round(float(thr)))
+    return BoardPoseSettings(
+        period_ms=int(round(period)),
+        window=args.window,
+        hold_windows=args.hold,
+        holdoff_ms=int(round(args.holdoff * 1000.0)),
+        accel_threshold=max(1, int(round(args.accel_threshold * per_g))),
+        gyro_threshold=gyro,
+        beep_ms=args.beep_ms,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     if args.poll_hz is not None and not args.poll_hz > 0:
         raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
     channels = args.channels
-    if channels is None and args.protocol != "raw":
+    board = None
+    if args.board_poses:
+        if args.protocol != "framed":
+            raise CalibrationError("--board-poses comes in the framed protocol: use "
+                                   "--protocol framed")
+        board = board_settings(args)
+        channels = 7 if channels is None else channels
+    elif channels is None and args.protocol != "raw":
         channels = 10
+    args.board_settings = board
     if args.out_dir is not None or len(args.port) > 1:
         from ._multicapture import run_many
 
@@ -126,12 +179,20 @@ def run(args: argparse.Namespace) -> int:
         request_byte=args.request_byte,
         switch_mode=not args.no_mode_byte,
         poll_interval_s=1.0 / args.poll_hz if args.poll_hz else 0.0,
+        board_poses=board,
     )
     names = channel_names(args.protocol, channels)
+    if board is not None:
+        names = (*names, POSE_N_COLUMN)
     mode = "append" if args.append else "overwrite" if args.overwrite else "new"
     out = sys.stderr
     if not args.quiet:
         how = "polled" if reader.polled else "streaming"
+        if board is not None:
+            how = (f"poses found on the board: {board.period_ms} ms per sample, windows of "
+                   f"{board.window}, {board.hold_windows} averaged, hold-off "
+                   f"{board.holdoff_ms} ms, thresholds accel {board.accel_threshold} gyro "
+                   f"{board.gyro_threshold or 'off'} counts")
         print(
             f"triaxcal capture: {port} at {args.baud} baud, {args.protocol} ({how}), "
             f"{len(names)} channels ({' '.join(names)}) -> {args.out}; Ctrl-C stops",

@@ -34,6 +34,7 @@ from ..errors import CalibrationError
 from ..field import ExpectedField
 from ..fit import MODELS
 from ..io.akm import apply_asa, asa_factors
+from ..io.capture import POSE_N_COLUMN
 from ..io.files import check_output
 from ..io.tables import SENSOR_COLUMNS, Table, pick_columns, read_table
 from ..parts import fold_asa
@@ -225,7 +226,17 @@ def pose_points(
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Still-pose means of columns ``cols``, and the statistics that say how they were found
     (``poses``, ``n_poses``, ``pose_detection``: the settings with the values the data
-    decided, so that ``report`` finds the same poses again)."""
+    decided, so that ``report`` finds the same poses again).
+
+    A session whose rows are the board's pose means (a ``pose_n`` column: ``triaxcal capture
+    --board-poses``) is taken as it is: each row is one pose, ``pose_source`` says so."""
+    if table.names is not None and POSE_N_COLUMN in table.names:
+        if not len(table.data):
+            raise CalibrationError(f"{table.path} has no poses: the board sent none")
+        n = table.data[:, table.names.index(POSE_N_COLUMN)]
+        return table.data[:, cols], {"poses": True, "n_poses": len(table.data),
+                                     "pose_source": "board",
+                                     "pose_samples_min": int(n.min()) if len(n) else 0}
     accel = None if "accel" in sensor_columns(table.names) else cols
     det, how = session_poses(table.names, table.data, settings, accel=accel)
     if len(det.poses) == 0:

@@ -12,6 +12,11 @@ session has (:class:`~triaxcal.poses.PoseSettings`: the same detection as ``tria
 terminal bell, and a status line shows the samples, the poses, the share of the sphere of
 directions covered so far (:mod:`triaxcal.coverage`, the measure every command uses) and which
 way to turn the board next.
+
+When the board finds the poses itself (a :class:`~triaxcal.io.serial.SerialReader` with
+``board_poses``: the firmware's mode ``S``), every record is one pose and is written as one
+row, the channel means followed by ``pose_n``, the samples the board averaged; that column
+tells ``triaxcal fit`` and ``report`` that the rows are pose means already.
 """
 
 from __future__ import annotations
@@ -36,11 +41,13 @@ from ..coverage import sphere_cells, suggest_turn
 from ..detect import Pose, PoseDetector
 from ..errors import CalibrationError
 from ..poses import HEAD_ROWS, PoseSettings, ResolvedPoses
+from .board_poses import BoardPoseSettings
 from .files import os_error_message
 from .protocol import CHANNELS_7, CHANNELS_10
 from .serial import ReaderStats, Record, SerialReader
 
 __all__ = [
+    "POSE_N_COLUMN",
     "CaptureResult",
     "SessionWriteError",
     "SessionWriter",
@@ -51,6 +58,10 @@ __all__ = [
     "sphere_cells",
     "suggest_turn",
 ]
+
+
+#: The column of a session whose rows are the board's pose means (samples averaged per row).
+POSE_N_COLUMN = "pose_n"
 
 
 def channel_names(protocol: str, channels: int | None) -> tuple[str, ...]:
@@ -319,7 +330,10 @@ class CaptureResult:
     counters; ``events`` the (kind, message) pairs the reader reported; ``detection`` the pose
     settings with the values the data decided (counts per g, sample rate), which replay the
     same poses on the saved session (:func:`triaxcal.poses.session_poses`); ``thresholds``
-    each sensor's threshold in its raw units (learnt ones as learnt).
+    each sensor's threshold in its raw units (learnt ones as learnt). When the board found the
+    poses (``board_poses``), each pose is one row of the session (``start``, ``end`` are its
+    row index and the next; ``n`` the samples the board averaged), ``detection`` is None and
+    ``board_settings`` holds the settings the board reported.
     """
 
     path: Path
@@ -332,6 +346,7 @@ class CaptureResult:
     events: tuple[tuple[str, str], ...] = field(default=())
     detection: PoseSettings | None = None
     thresholds: dict[str, float | None] = field(default_factory=dict)
+    board_settings: BoardPoseSettings | None = None
 
 
 class _Status:
@@ -480,7 +495,14 @@ def capture(
     cols = tuple(accel_columns) if accel_columns is not None else None
     if cols is None and not all(c in names for c in ("ax", "ay", "az")):
         cols = (0, 1, 2)
-    live = _LivePoses(settings, names, cols) if len(names) >= 3 else None
+    board = getattr(reader, "board_poses", None) is not None
+    live: _LivePoses | _BoardPoses | None
+    if board:
+        if not names or names[-1] != POSE_N_COLUMN:
+            names = (*names, POSE_N_COLUMN)
+        live = _BoardPoses(names, reader, on_event)
+    else:
+        live = _LivePoses(settings, names, cols) if len(names) >= 3 else None
     registered: list[Pose] = []
     interrupted = threading.Event()
     t0 = time.monotonic()
@@ -514,6 +536,8 @@ def capture(
                             registered.append(p)
                             status.ring()
                     last = live.last
+                if isinstance(live, _BoardPoses):
+                    last = live.watch()
                 if samples is not None and writer.rows >= samples:
                     stopped_by = "samples"
                     break
@@ -555,6 +579,8 @@ def capture(
     if live is not None and live.det is not None:
         # the same poses, each averaged over its whole still run (the bell rang earlier)
         registered = live.det.poses[:len(registered)]
+    if isinstance(live, _BoardPoses):
+        live.watch()
     cov = coverage(live.points(registered)) if live is not None and registered else 0.0
     status.line(_status_text(writer.rows, registered, live, last, reader, poses, samples),
                 force=True)
@@ -570,7 +596,65 @@ def capture(
         events=tuple(events),
         detection=live.settings if live is not None else None,
         thresholds=live.thresholds if live is not None else {},
+        board_settings=live.board_settings if isinstance(live, _BoardPoses) else None,
     )
+
+
+class _BoardPoses:
+    """The board's own poses (firmware mode ``S``): every record is one pose, ``(*means, n)``."""
+
+    det = None
+    settings = None
+
+    def __init__(self, names: Sequence[str], reader: SerialReader, on_event: Any) -> None:
+        self.names = tuple(names)
+        self.reader = reader
+        self.on_event = on_event
+        self.rows = 0
+        self.last: np.ndarray | None = None
+        self.board_settings: BoardPoseSettings | None = None
+        self.thresholds: dict[str, float | None] = {}
+        named = all(c in self.names for c in ("ax", "ay", "az"))
+        self.accel_columns = tuple(self.names.index(c) for c in ("ax", "ay", "az")) if named \
+            else (0, 1, 2)
+
+    def update(self, recs: Sequence[Record]) -> list[Pose]:
+        out = []
+        for r in recs:
+            if len(r.values) != len(self.names):
+                continue
+            mean = np.asarray(r.values[:-1], dtype=np.float64)
+            out.append(Pose(start=self.rows, end=self.rows + 1, mean=mean, n=int(r.values[-1])))
+            self.rows += 1
+        return out
+
+    def watch(self) -> np.ndarray | None:
+        """Follow the board's status: its last window's accelerometer mean (for the next-turn
+        hint) and the settings it reports (told once if they differ from those sent)."""
+        dec = self.reader.decoder
+        st = getattr(dec, "status", None)
+        if st is not None:
+            self.last = np.asarray(st.accel, dtype=np.float64)
+        got = getattr(dec, "settings", None)
+        if got is not None and got != self.board_settings:
+            self.board_settings = got
+            sent = self.reader.board_poses
+            gyro = got.gyro_threshold
+            self.thresholds = {"accel": float(got.accel_threshold),
+                               "gyro": float(gyro) if gyro else None}
+            if sent is not None and got != sent:
+                refused = getattr(dec, "settings_accepted", None) is False
+                self.on_event("settings", f"the board uses other pose settings than sent "
+                              f"({got.to_dict()} instead of {sent.to_dict()})"
+                              + (": it refused them" if refused else ""))
+        return self.last
+
+    def finish(self) -> list[Pose]:
+        return []
+
+    def points(self, poses: Sequence[Pose]) -> np.ndarray:
+        cols = list(self.accel_columns)
+        return np.array([p.mean[cols] for p in poses]).reshape(-1, 3)
 
 
 class _LivePoses:
@@ -641,7 +725,7 @@ class _LivePoses:
 def _status_text(
     rows: int,
     registered: list[Pose],
-    live: _LivePoses | None,
+    live: _LivePoses | _BoardPoses | None,
     last: Any,
     reader: SerialReader,
     want_poses: int | None,
