@@ -18,8 +18,13 @@ still pose rings the bell, and the status line says which way to turn next. Ctrl
 with everything saved. The session CSV has a header 't,<channels>' and one row per record:
 host time in seconds, then the values as received (counts).
 
+With --live, a page in the browser (http://127.0.0.1:8765 by default) shows the readings
+filling the sphere in 3D, the running fit with its standard errors, MotionCal's four quality
+numbers and the stream's health, with buttons to save, export and send the calibration.
+
 examples:
   triaxcal capture --port /dev/ttyUSB0 --protocol framed --poses 30 --out s.csv
+  triaxcal capture --port /dev/ttyACM0 --protocol framed --live --out s.csv
   triaxcal capture --port /dev/ttyACM0 --protocol binary --channels 7 --out s.csv
   triaxcal capture --port COM3 --protocol raw --samples 5000 --out s.csv
 """
@@ -40,6 +45,31 @@ def _request_byte(text: str) -> bytes:
         return parse_request_byte(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _http_port(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from None
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number 0..65535, got {v}")
+    return v
+
+
+def add_live_options(p: argparse.ArgumentParser) -> None:
+    """``--live``, ``--http-host``, ``--http-port``, ``--no-browser`` (capture and demo)."""
+    g = p.add_argument_group("live page (needs: pip install 'triaxcal[live]')")
+    g.add_argument("--live", action="store_true",
+                   help="serve a live page while capturing: the readings in 3D, coverage, the "
+                        "running fit, quality numbers, stream health, Save/Export/Send buttons")
+    g.add_argument("--http-host", default="127.0.0.1", metavar="HOST",
+                   help="address of the live page (default 127.0.0.1: this machine only; "
+                        "0.0.0.0 shows the data to the whole network)")
+    g.add_argument("--http-port", type=_http_port, default=8765, metavar="PORT",
+                   help="port of the live page (default 8765; the next free one if taken)")
+    g.add_argument("--no-browser", action="store_true",
+                   help="do not open the live page in the default browser")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -92,6 +122,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "for raw; 1 if a text board prints g)")
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
+    add_live_options(p)
     p.set_defaults(func=run)
 
 
@@ -100,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
         raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
     if args.counts_per_g is not None and not args.counts_per_g > 0:
         raise CalibrationError(f"--counts-per-g must be > 0, got {args.counts_per_g}")
+    if args.live:
+        from ..live.server import check_live_extra
+
+        check_live_extra()  # before the port is opened: say what to install first
     channels = args.channels
     if channels is None and args.protocol != "raw":
         channels = 10
@@ -123,20 +158,21 @@ def run(args: argparse.Namespace) -> int:
             f"{len(names)} channels ({' '.join(names)}) -> {args.out}; Ctrl-C stops",
             file=out,
         )
-    result = capture(
-        reader,
-        args.out,
-        samples=args.samples,
-        poses=args.poses,
-        duration_s=args.seconds,
-        mode=mode,
-        columns=names,
-        units_per_g=args.counts_per_g,
-        window=args.window,
-        hold_windows=args.hold,
-        progress=None if args.quiet else out,
-        bell=not args.no_bell,
-    )
+    kwargs = {"samples": args.samples, "poses": args.poses, "duration_s": args.seconds,
+              "units_per_g": args.counts_per_g, "window": args.window,
+              "hold_windows": args.hold, "bell": not args.no_bell}
+    if args.live:
+        from ..live import LiveOptions
+        from ..live.run import live_capture
+
+        result = live_capture(
+            reader, args.out, columns=names, mode=mode,
+            options=LiveOptions(window=args.window, units_per_g=args.counts_per_g),
+            host=args.http_host, port=args.http_port, open_browser=not args.no_browser,
+            progress=None if args.quiet else out, notices=out, **kwargs)
+    else:
+        result = capture(reader, args.out, mode=mode, columns=names,
+                         progress=None if args.quiet else out, **kwargs)
     st = result.stats
     d = st.decoder
     why = {"interrupt": "stopped by Ctrl-C", "samples": "sample count reached",

@@ -27,10 +27,11 @@ from ..detect import detect_poses, detect_still
 from ..errors import CalibrationError
 from ..export import write_outputs
 from ..fit import EllipsoidFit, fit_ellipsoid
-from ..io.capture import CaptureResult, capture, read_session
+from ..io.capture import CaptureResult, capture, channel_names, read_session
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
 from ..sim import GYRO_COUNTS_PER_DPS, SensorTruth, SimDevice, SimIMU, globe_script
+from .capture import add_live_options
 
 HELP = "capture from a simulated board, calibrate it, and compare with the truth"
 
@@ -56,20 +57,44 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", default="framed", choices=PROTOCOLS,
                    help="wire protocol between the simulated board and the host, streamed "
                         "(default framed)")
-    p.add_argument("--speed", type=float, default=40.0,
-                   help="simulated seconds per real second (default 40)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="simulated seconds per real second (default 40; 5 with --live, so "
+                        "that the sphere fills in about 25 s)")
     p.add_argument("--seed", type=int, default=1, help="seed of the simulated sensor (default 1)")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
+    add_live_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.speed is None:
+        args.speed = 5.0 if args.live else 40.0
     if not args.speed > 0:
         raise CalibrationError(f"--speed must be > 0, got {args.speed}")
+    live = None
+    if args.live:
+        from ..live.server import check_live_extra
+
+        check_live_extra()
+        live = {"host": args.http_host, "port": args.http_port,
+                "open_browser": not args.no_browser}
     result = run_demo(out, protocol=args.protocol, speed=args.speed, seed=args.seed,
-                      progress=None if args.quiet else sys.stderr, plot=not args.no_plot)
+                      progress=None if args.quiet else sys.stderr, plot=not args.no_plot,
+                      live=live)
+    page = result.pop("live_page", None)
+    try:
+        _print_result(args, result)
+        if page is not None:
+            page.linger()
+    finally:
+        if page is not None:
+            page.close()
+    return 0
+
+
+def _print_result(args: argparse.Namespace, result: dict[str, Any]) -> None:
     print(result["table"])
     print(f"session: {result['session']}\nresults: {result['results']}")
     for kind, path in result["outputs"].items():
@@ -77,7 +102,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot and not any(k.startswith("figure_") for k in result["outputs"]):
         print("report figures skipped: matplotlib is not installed "
               "(pip install 'triaxcal[plot]')")
-    return 0
 
 
 def run_demo(
@@ -88,12 +112,17 @@ def run_demo(
     seed: int = 1,
     progress: Any = None,
     plot: bool = True,
+    live: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run the demo into folder ``out``; returns the results dict (also in results.json).
 
     Besides ``session.csv`` and ``results.json``, writes the calibration (``calibration.json``,
     ``triaxcal_calibration.h``, ``triaxcal_calibration_fixed.h``, ``motioncal.bin``) and a
     quality report per sensor (``report_<sensor>.txt`` and, with ``plot``, ``.png``).
+
+    ``live`` (``{"host", "port", "open_browser"}``) serves the live page during the capture
+    (:class:`triaxcal.live.LivePage`, fitting the magnetometer to the simulated field); the
+    page, still serving, is returned as ``results["live_page"]``: close it when done.
     """
     t_start = time.monotonic()
     imu = SimIMU(seed)
@@ -106,9 +135,40 @@ def run_demo(
             print(f"triaxcal demo: simulated board on {dev.port} ({dev.pty_path}), "
                   f"{len(script)} poses of the globe scheme, {protocol} protocol, "
                   f"{speed:g}x real time", file=progress)
-        cap = capture(reader, session, stop=dev.finished, mode="overwrite", bell=False,
-                      progress=progress, handle_sigint=False)
+        page = None
+        if live is not None:
+            from ..live import LiveOptions
+            from ..live.run import LivePage
+
+            page = LivePage(reader, session, columns=channel_names(protocol, channels),
+                            options=LiveOptions(mag_radius=f"{imu.truth.field_ut:g}uT"),
+                            host=live["host"], port=live["port"],
+                            open_browser=live["open_browser"], progress=progress,
+                            mode="overwrite").start()
+            try:
+                cap = page.capture(stop=dev.finished, bell=False, handle_sigint=False)
+            except BaseException:
+                page.close()
+                raise
+        else:
+            cap = capture(reader, session, stop=dev.finished, mode="overwrite", bell=False,
+                          progress=progress, handle_sigint=False)
     t_capture = time.monotonic() - t_start
+    try:
+        results = _analyse(out, session, protocol, speed, seed, plot, imu, dev, cap, t_start,
+                           t_capture)
+    except BaseException:
+        if page is not None:
+            page.close()
+        raise
+    if page is not None:
+        results["live_page"] = page
+    return results
+
+
+def _analyse(out: Path, session: Path, protocol: str, speed: float, seed: int, plot: bool,
+             imu: SimIMU, dev: SimDevice, cap: CaptureResult, t_start: float,
+             t_capture: float) -> dict[str, Any]:
 
     columns, data = read_session(session)
     values = data[:, 1:]

@@ -1,0 +1,224 @@
+"""The page's buttons, each the CLI command of the same name on the session being captured.
+
+* **Save calibration** = ``triaxcal fit SESSION --sensor accel --poses ... -o calibration.json
+  --new`` then ``triaxcal fit SESSION --sensor mag ... -o calibration.json`` (the commands are
+  built by :func:`fit_argv`, parsed by the CLI's own parser and run by its own
+  :func:`triaxcal.cli.fit.fit_file`), into the live options' ``out_dir``.
+* **Export C header** = Save, then ``triaxcal export calibration.json --format c`` (or
+  ``c-fixed``) ``-o <prefix>_calibration.h`` (``<prefix>_calibration_fixed.h``).
+* **Send to board** = Save, then ``triaxcal send calibration.json``: the 68-byte MotionCal
+  packet goes out over the port being captured (it stays open), and the board's ``Cal1:``
+  and ``Cal2:`` echo must repeat every value. The echo lines arrive amid the stream, so the
+  decoder drops the frame they interrupt (it is counted like any damaged frame); polled binary
+  cannot carry them (the next request clears the input), so Send needs a streaming protocol.
+
+After a Reset, Save fits only the rows captured since: they are first copied, header and all,
+to ``<session>.after-reset-<k>.csv`` next to the session, which is then the file fitted (so
+``triaxcal fit`` on that file gives the same calibration).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..errors import CalibrationError
+
+if TYPE_CHECKING:
+    from ..calibration import Calibration
+    from ..cli.fit import FitOutcome
+    from .state import LiveState
+
+__all__ = ["export_header", "fit_argv", "fit_session", "reset", "save", "send"]
+
+_ACTION_LOCK = threading.Lock()
+
+
+def fit_argv(state: LiveState, sensor: str, session: str, output: str, *, new: bool) -> list[str]:
+    """The ``triaxcal fit`` arguments (without ``triaxcal``) that fit ``sensor`` of
+    ``session`` with the live page's options."""
+    o = state.options
+    argv = ["fit", session, "--sensor", sensor, "--model", o.model, "--sigma", repr(float(o.sigma)),
+            "--rounds", str(o.rounds)]
+    if sensor == "accel":
+        argv += ["--poses", "--window", str(o.window), "--units-per-g",
+                 repr(float(state.units_per_g)), "--radius", o.accel_radius]
+    elif o.mag_radius is not None:
+        argv += ["--radius", o.mag_radius]
+    argv += ["-o", output]
+    if new:
+        argv.append("--new")
+    return argv
+
+
+def _session_to_fit(state: LiveState) -> Path:
+    """The session file, or after a Reset a copy of the rows captured since."""
+    skip = state.existing_rows + state.reset_row
+    if state.reset_row == 0:
+        return state.session
+    out = state.session.with_name(f"{state.session.stem}.after-reset-{state.resets}.csv")
+    with open(state.session, encoding="ascii", errors="replace") as src, \
+            open(out, "w", encoding="ascii", newline="") as dst:
+        dst.write(src.readline())
+        for i, line in enumerate(src):
+            if i >= skip:
+                dst.write(line if line.endswith("\n") else line + "\n")
+    return out
+
+
+def fit_session(state: LiveState, output: str | None = None) -> dict[str, FitOutcome]:
+    """Fit every sensor of the session as ``triaxcal fit`` does; ``{sensor: FitOutcome}``.
+
+    Raises :class:`CalibrationError` when no sensor could be fitted (the messages of each)."""
+    from ..cli import build_parser
+    from ..cli.fit import fit_file
+
+    if not state.session.exists():
+        raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")
+    data = str(_session_to_fit(state))
+    out = output or str(state.out_dir / "calibration.json")
+    parser = build_parser()
+    outcomes: dict[str, FitOutcome] = {}
+    errors: list[str] = []
+    for sensor in ("accel", "mag"):
+        if sensor not in state.cols:
+            continue
+        args = parser.parse_args(fit_argv(state, sensor, data, out, new=not outcomes))
+        try:
+            outcomes[sensor] = fit_file(args)
+        except CalibrationError as exc:
+            errors.append(f"{sensor}: {exc}")
+    if not outcomes:
+        raise CalibrationError("; ".join(errors) or "no sensor to fit in this session")
+    state.last_fit_errors = errors
+    return outcomes
+
+
+def _save(state: LiveState) -> tuple[Calibration, Path, str]:
+    from ..calibration import Calibration
+
+    path = state.out_dir / "calibration.json"
+    outcomes = fit_session(state, str(path))
+    cal: Calibration | None = None
+    lines = []
+    for sensor, out in outcomes.items():
+        # as `triaxcal fit -o PATH --new` for the first sensor, then `-o PATH` (update)
+        part: dict[str, Any] = {sensor: out.part}
+        cal = Calibration(**part) if cal is None else cal.replace(**part)
+        s = out.part.stats
+        lines.append(
+            f"{sensor} ({out.part.raw_unit} -> {out.part.unit}), model {out.part.model}, "
+            f"{s['n']} readings used, {len(out.rejected)} rejected, residual RMS "
+            f"{s['rms']:.4g} {out.part.unit} ({s['rms_pct_of_radius']:.3g} % of radius), "
+            f"coverage {s['coverage_pct']:.0f} %")
+    assert cal is not None
+    state.out_dir.mkdir(parents=True, exist_ok=True)
+    cal.save(path)
+    errs = getattr(state, "last_fit_errors", [])
+    msg = f"wrote {path}: " + "; ".join(lines)
+    if errs:
+        msg += " (not fitted: " + "; ".join(errs) + ")"
+    return cal, path, msg
+
+
+def _run(state: LiveState, action: str, fn: Any) -> dict[str, Any]:
+    if not _ACTION_LOCK.acquire(timeout=0.1):
+        return {"action": action, "ok": False, "time": time.time(),
+                "message": "another action is still running: wait for it to finish"}
+    try:
+        try:
+            result = {"action": action, "ok": True, **fn()}
+        except CalibrationError as exc:
+            result = {"action": action, "ok": False, "message": str(exc)}
+    finally:
+        _ACTION_LOCK.release()
+    result["time"] = time.time()
+    state.last_action = result
+    return result
+
+
+def save(state: LiveState) -> dict[str, Any]:
+    """Save calibration: ``triaxcal fit`` of every sensor into ``calibration.json``."""
+    def go() -> dict[str, Any]:
+        _, path, msg = _save(state)
+        return {"message": msg, "path": str(path)}
+
+    return _run(state, "save", go)
+
+
+def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
+    """Export C header: Save, then ``triaxcal export calibration.json --format FMT``."""
+    from ..export import export
+    from ..export._cgen import _ident
+
+    if fmt not in ("c", "c-fixed"):
+        return {"action": "export", "ok": False, "message": f"unknown header format {fmt!r}: "
+                "use 'c' (float) or 'c-fixed' (fixed point)"}
+
+    def go() -> dict[str, Any]:
+        cal, cal_path, msg = _save(state)
+        prefix = _ident(state.options.prefix)
+        name = f"{prefix}_calibration.h" if fmt == "c" else f"{prefix}_calibration_fixed.h"
+        out = export(cal, fmt, state.out_dir / name, prefix=prefix)
+        return {"message": f"{msg}; wrote {out} ({fmt}, {out.stat().st_size} bytes; sensors: "
+                           f"{', '.join(cal.sensors)})", "path": str(out)}
+
+    return _run(state, f"export-{fmt}", go)
+
+
+def send(state: LiveState) -> dict[str, Any]:
+    """Send to board: Save, then the MotionCal packet over the open port, with the echo check
+    of ``triaxcal send``."""
+    from ..export import echo_matches, motioncal_packet, parse_motioncal_echo
+
+    def go() -> dict[str, Any]:
+        reader = state._reader
+        if reader is None or state.status == "finished":
+            raise CalibrationError(
+                "the capture has ended, so the port is closed: send the saved calibration with "
+                "`triaxcal send calibration.json --port PORT`")
+        if getattr(reader, "polled", False):
+            raise CalibrationError(
+                "polled binary cannot carry the board's echo while capturing: stop the capture "
+                "(Ctrl-C), then `triaxcal send calibration.json --port PORT`")
+        cal, cal_path, msg = _save(state)
+        packet = motioncal_packet(cal)
+        state._echo = bytearray()
+        try:
+            reader.write(packet)
+            deadline = time.monotonic() + state.options.send_timeout_s
+            echo = None
+            while time.monotonic() < deadline:
+                echo = parse_motioncal_echo(bytes(state._echo))
+                if echo is not None:
+                    break
+                time.sleep(0.02)
+        finally:
+            seen = len(state._echo or b"")
+            state._echo = None
+        if echo is None:
+            raise CalibrationError(
+                f"{msg}; but no Cal1:/Cal2: echo from {state.port} within "
+                f"{state.options.send_timeout_s:g} s ({seen} bytes received meanwhile): check "
+                "that the board runs a sketch that accepts MotionCal packets")
+        bad = echo_matches(packet, *echo)
+        if bad:
+            raise CalibrationError(
+                f"{msg}; but the board echoed different values: " + "; ".join(bad[:5])
+                + " -- the packet may have been garbled; send it again")
+        cal1, cal2 = echo
+        return {"message": f"{msg}; sent {len(packet)}-byte MotionCal packet to {state.port}; "
+                           "the board confirmed it (Cal1: "
+                           + ", ".join(f"{v:.4f}" for v in cal1) + "; Cal2: "
+                           + ", ".join(f"{v:.4f}" for v in cal2) + ")",
+                "path": str(cal_path)}
+
+    return _run(state, "send", go)
+
+
+def reset(state: LiveState) -> dict[str, Any]:
+    """Reset: forget the live poses, buffer and fits (the session file keeps every row)."""
+    return _run(state, "reset", lambda: {k: v for k, v in state.reset().items()
+                                         if k not in ("action", "ok")})
