@@ -166,7 +166,7 @@ def min_sample_distance(radius: float, capacity: int) -> float:
     geodesic sphere with ``2 capacity - 4`` faces.
 
     >>> round(min_sample_distance(1.0, 300), 4), round(min_sample_distance(1.0, 650), 4)
-    (0.1085, 0.0747)
+    (0.1099, 0.0747)
     """
     faces = 2 * int(capacity) - 4
     a = 4.0 * math.pi / (3.0 * faces) + math.pi / 3.0
