@@ -30,7 +30,7 @@ from ..fit import EllipsoidFit, fit_ellipsoid
 from ..io.capture import CaptureResult, capture, channel_names, read_session
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
-from ..sim import GYRO_COUNTS_PER_DPS, SensorTruth, SimDevice, SimIMU, globe_script
+from ..sim import GYRO_COUNTS_PER_DPS, Script, SensorTruth, SimDevice, SimIMU, globe_script
 from .capture import add_live_options
 
 HELP = "capture from a simulated board, calibrate it, and compare with the truth"
@@ -121,19 +121,25 @@ def run_demo(
     quality report per sensor (``report_<sensor>.txt`` and, with ``plot``, ``.png``).
 
     ``live`` (``{"host", "port", "open_browser"}``) serves the live page during the capture
-    (:class:`triaxcal.live.LivePage`, fitting the magnetometer to the simulated field); the
-    page, still serving, is returned as ``results["live_page"]``: close it when done.
+    (:class:`triaxcal.live.LivePage`, fitting the magnetometer to the simulated field; its
+    buttons write into ``out/live``); the page, still serving, is returned as
+    ``results["live_page"]``: close it when done.
     """
     t_start = time.monotonic()
     imu = SimIMU(seed)
     script = globe_script(hold_s=1.0, seed=seed)
+    if live is not None:
+        # the globe leaves the magnetometer's sphere unevenly covered (MotionCal's wobble
+        # stays red): end with a tumble through 30 random orientations, as a user would
+        script = script + tumble_script(30, seed=seed)
     session = out / "session.csv"
     channels = None if protocol == "raw" else 10
     with SimDevice(imu, script, rate_hz=RATE_HZ, speed=speed, loop=False, seed=seed) as dev:
         reader = SerialReader(dev.port, protocol=protocol, channels=channels, stream=True)
         if progress is not None:
             print(f"triaxcal demo: simulated board on {dev.port} ({dev.pty_path}), "
-                  f"{len(script)} poses of the globe scheme, {protocol} protocol, "
+                  f"{len(script)} poses of the globe scheme"
+                  + (" and a tumble" if live is not None else "") + f", {protocol} protocol, "
                   f"{speed:g}x real time", file=progress)
         page = None
         if live is not None:
@@ -141,7 +147,8 @@ def run_demo(
             from ..live.run import LivePage
 
             page = LivePage(reader, session, columns=channel_names(protocol, channels),
-                            options=LiveOptions(mag_radius=f"{imu.truth.field_ut:g}uT"),
+                            options=LiveOptions(mag_radius=f"{imu.truth.field_ut:g}uT",
+                                                out_dir=out / "live"),
                             host=live["host"], port=live["port"],
                             open_browser=live["open_browser"], progress=progress,
                             mode="overwrite").start()
@@ -268,6 +275,18 @@ def _analyse(out: Path, session: Path, protocol: str, speed: float, seed: int, p
     results["results"] = str(path)
     results["table"] = table
     return results
+
+
+def tumble_script(n: int, *, seed: int = 0, hold_s: float = 0.5) -> Script:
+    """``n`` orientations drawn uniformly at random (unit quaternions), held ``hold_s`` each."""
+    q = np.random.default_rng([seed, 7]).normal(size=(n, 4))
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    rot = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)
+    return Script.from_poses(rot, hold_s=hold_s, settle_s=0.0)
 
 
 _PARAM_CELL = {"diag_x": (0, 0), "diag_y": (1, 1), "diag_z": (2, 2),
