@@ -1,10 +1,11 @@
 # One target per CI step; `.ci/run` calls `make test`, the README's test command.
 PY ?= python3
-APT_PACKAGES := gcc-avr avr-libc qemu-system-misc
+APT_PACKAGES := gcc-avr avr-libc qemu-system-misc chromium chromium-driver
 
 .PHONY: deps install test test-rust test-python lint stubs bench demo
 
-# Debian packages the tests need (the AVR firmware build and its QEMU run). Skipped when
+# Debian packages the tests need (the AVR firmware build and its QEMU run; the headless
+# browser of the live page's tests). Skipped when
 # everything is present already; needs root (as on CI) otherwise.
 deps:
 	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \

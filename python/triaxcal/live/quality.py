@@ -41,6 +41,7 @@ from ..errors import CalibrationError
 
 __all__ = [
     "MOTIONCAL_LIMITS",
+    "biggest_empty_cap",
     "MotionCalQuality",
     "SpreadBuffer",
     "min_sample_distance",
@@ -158,6 +159,60 @@ def motioncal_quality(calibrated: Any, radius: float | None = None) -> MotionCal
     r = float(radius) if radius is not None and radius > 0 else mean
     fit_error = float(np.sqrt(np.mean((mag - r) ** 2))) / r * 100.0
     return MotionCalQuality(gaps, variance, wobble, fit_error, n)
+
+
+def _fibonacci(n: int) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(1.0 - z * z)
+    phi = i * math.pi * (3.0 - math.sqrt(5.0))
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+_COARSE = _fibonacci(600)
+
+
+def _cap_around(c: np.ndarray, deg: float, n: int) -> np.ndarray:
+    """``n`` directions spread over the cap of angular radius ``deg`` around unit ``c``."""
+    i = np.arange(n) + 0.5
+    cos_t = 1.0 - (1.0 - math.cos(math.radians(deg))) * i / n
+    sin_t = np.sqrt(1.0 - cos_t**2)
+    phi = i * math.pi * (3.0 - math.sqrt(5.0))
+    a = np.array([1.0, 0.0, 0.0]) if abs(c[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(c, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(c, e1)
+    return (cos_t[:, None] * c + sin_t[:, None] * (np.cos(phi)[:, None] * e1
+                                                   + np.sin(phi)[:, None] * e2))
+
+
+def biggest_empty_cap(directions: Any) -> tuple[np.ndarray, float] | None:
+    """The largest cap of the sphere holding none of ``directions`` (N, 3; any lengths):
+    ``(centre unit vector, angular radius in degrees)``, or ``None`` without directions.
+
+    The direction farthest from every reading, as :func:`triaxcal.report.empty_regions`
+    finds it, searched on a coarse grid (600 directions, 8 deg apart) and refined twice
+    around the best one, to about a degree, at a fifth of the cost (for the live loop).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> c, deg = biggest_empty_cap([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, -1]])
+    >>> (np.round(c, 2) + 0.0).tolist(), round(deg)
+    ([0.0, 0.0, 1.0], 90)
+    """
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    n = np.linalg.norm(d, axis=1)
+    d = d[n > 0] / n[n > 0, None]
+    if not len(d):
+        return None
+    dt = np.ascontiguousarray(d.T)
+    best = _COARSE[int(np.argmin((_COARSE @ dt).max(axis=1)))]
+    for radius in (6.0, 1.5):
+        cand = np.vstack([best, _cap_around(best, radius, 120)])
+        best = cand[int(np.argmin((cand @ dt).max(axis=1)))]
+    near = float(np.max(d @ best))
+    return best, math.degrees(math.acos(min(1.0, max(-1.0, near))))
 
 
 def min_sample_distance(radius: float, capacity: int) -> float:

@@ -42,7 +42,7 @@ import numpy as np
 from ..detect import PoseDetector
 from ..errors import CalibrationError
 from ..fit import MODELS
-from .quality import MOTIONCAL_LIMITS, SpreadBuffer, motioncal_quality
+from .quality import MOTIONCAL_LIMITS, SpreadBuffer, biggest_empty_cap, motioncal_quality
 
 __all__ = ["SENSOR_COLUMNS", "LiveOptions", "LiveState"]
 
@@ -295,8 +295,9 @@ class LiveState:
         self._fitted_versions: dict[str, int] = {"accel": -1, "mag": -1}
         self._final_points: dict[str, np.ndarray] = {}
         self._derived_cache: dict[str, tuple[Any, float, Any]] = {}
-        self._precision: dict[str, deque[tuple[float, float]]] = {
-            "accel": deque(maxlen=300), "mag": deque(maxlen=300)}
+        # (time, largest offset standard error): at most one a second; when 120 are kept,
+        # every other one goes, so the history spans the whole capture in bounded memory
+        self._precision: dict[str, list[tuple[float, float]]] = {"accel": [], "mag": []}
 
     def attach(self, reader: Any) -> None:
         """Watch ``reader`` (a :class:`~triaxcal.io.serial.SerialReader`): its counters,
@@ -413,8 +414,12 @@ class LiveState:
                 continue
             self._fits[sensor] = fit
             self._fit_errors[sensor] = None
-            self._precision[sensor].append(
-                (time.time(), max(fit.stderr.get(f"offset_{a}", math.nan) for a in "xyz")))
+            hist = self._precision[sensor]
+            now_s = time.time()
+            if not hist or now_s - hist[-1][0] >= 1.0:
+                hist.append((now_s, max(fit.stderr.get(f"offset_{a}", math.nan) for a in "xyz")))
+                if len(hist) >= 120:
+                    del hist[-2::-2]
         doc, points = self._build(poses)
         self.refit_ms = 1000.0 * (time.perf_counter() - t0)
         doc["timing"] = {"refit_ms": self.refit_ms, "publishes": self.publishes + 1,
@@ -585,7 +590,7 @@ class LiveState:
         """Coverage, the biggest empty cap and the quality checks of one sensor; recomputed
         when its points or fit changed, at most 4 times a second (the cap search is the
         costly part)."""
-        from ..report import coverage, direction_words, empty_regions
+        from ..report import coverage, direction_words
 
         now = time.monotonic()
         cached = self._derived_cache.get(sensor)
@@ -596,12 +601,12 @@ class LiveState:
             dirs = fit.apply(raw) if fit is not None else raw - (
                 np.median(raw, axis=0) if sensor == "mag" and len(raw) > 20 else 0.0)
             counts, pct = coverage(dirs)
-            caps = empty_regions(dirs, min_deg=0.0, max_regions=1)
+            found = biggest_empty_cap(dirs)
         else:
-            counts, pct, caps = np.zeros((10, 10), dtype=np.int64), 0.0, []
+            counts, pct, found = np.zeros((10, 10), dtype=np.int64), 0.0, None
         cap: dict[str, Any] | None = None
-        if caps:
-            c, ang = caps[0]
+        if found is not None:
+            c, ang = found
             cap = {"center": c, "deg": ang, "words": direction_words(c)}
         cov = {"pct": pct, "cells": counts, "cells_hit": int(np.count_nonzero(counts)),
                "cells_total": int(counts.size), "empty_cap": cap}
@@ -778,6 +783,9 @@ class LiveState:
                 unit=p.unit)
             self._fit_errors[sensor] = None
             self._derived_cache.clear()
+            self._precision[sensor].append(
+                (time.time(), max(self._fits[sensor].stderr.get(f"offset_{a}", math.nan)
+                                  for a in "xyz")))
             if sensor == "accel":
                 with self._lock:
                     self._final_points["accel"] = np.asarray(out.points, dtype=np.float64)

@@ -4,8 +4,9 @@
 "use strict";
 
 const T = (window.triaxcal = {
-  messages: 0, applied: 0, draws: { accel: 0, mag: 0 }, drawMs: { accel: 0, mag: 0 },
+  messages: 0, applied: 0, painted: 0, draws: { accel: 0, mag: 0 }, drawMs: { accel: 0, mag: 0 },
   state: null, points: {}, errors: [],
+  seen: [],  // [version, status, accelerometer poses, coverage %] of each state shown
 });
 const NAMES = { accel: "Accelerometer", mag: "Magnetometer" };
 const AX = ["x", "y", "z"];
@@ -47,6 +48,16 @@ function inv3(m) {
           [C / det, -(a * h - b * g) / det, (a * e - b * d) / det]];
 }
 function norm(v) { return Math.hypot(v[0], v[1], v[2]); }
+/* Replace an element's content only when it changed: layout is the page's main cost. */
+function setHTML(el, html) {
+  if (el.__html !== html) { el.innerHTML = html; el.__html = html; }
+}
+function setText(el, text) {
+  if (el.textContent !== text) el.textContent = text;
+}
+function shortPath(p) {
+  return p.length > 28 ? "\u2026/" + p.split(/[\\/]/).pop() : p;
+}
 function displayScale(sensor, st) {
   const unit = st.unit;
   if (sensor === "accel" && unit === "g") return [T.state.options.units_per_g, "counts/g"];
@@ -55,31 +66,38 @@ function displayScale(sensor, st) {
 }
 
 // ------------------------------------------------------------------ connection
+/* Every message updates the page's numbers at once (cheap); the 3D views are redrawn from
+   animation frames, as often as this machine manages (see schedule). */
 function connect() {
   const es = new EventSource("api/events");
   es.onmessage = (ev) => {
     T.messages += 1;
     lastMessageAt = performance.now();
-    $("pageLost").classList.add("hidden");
+    const t0 = performance.now();
     try {
-      apply(JSON.parse(ev.data));
+      const msg = JSON.parse(ev.data);
+      for (const [k, v] of Object.entries(msg.points || {})) T.points[k] = v;
+      apply(msg.state);
     } catch (e) {
       T.errors.push(String(e));
       throw e;
     }
+    T.applyMs = performance.now() - t0;
+    fresh = true;
+    schedule();
   };
 }
+let fresh = false;
 setInterval(() => {
-  if (lastMessageAt && performance.now() - lastMessageAt > 4000) {
-    $("pageLost").classList.remove("hidden");
+  const lost = lastMessageAt && performance.now() - lastMessageAt > 4000;
+  $("pageLost").classList.toggle("hidden", !lost);
+  if (lost) {
     const dot = document.querySelector("#source .dot");
     if (dot) dot.className = "dot off";
   }
 }, 1000);
 
-function apply(msg) {
-  const st = msg.state;
-  for (const [k, v] of Object.entries(msg.points || {})) T.points[k] = v;
+function apply(st) {
   T.state = st;
   header(st);
   banner(st.stream);
@@ -93,11 +111,13 @@ function apply(msg) {
   }
   gyro(st);
   stream(st);
-  $("commands").textContent = st.fit_commands.join("\n");
-  $("bufsize").textContent = st.options.mag_buffer;
+  setText($("commands"), st.fit_commands.join("\n"));
+  setText($("bufsize"), String(st.options.mag_buffer));
   T.applied += 1;
   T.version = st.version;
-  schedule();
+  const a = st.sensors.accel;
+  T.seen.push([st.version, st.status, a ? a.poses : null, a ? a.coverage.pct : null]);
+  if (T.seen.length > 3000) T.seen.splice(0, 1000);
 }
 
 // ------------------------------------------------------------------ header, banner, guide
@@ -105,9 +125,9 @@ function header(st) {
   const dotClass = st.status === "finished" ? "done" : st.stream.connected ? "on" : "off";
   const what = st.status === "finished" ? `capture ended (${esc(st.stopped_by || "")})`
     : st.status === "waiting" ? "waiting for data" : "capturing";
-  $("source").innerHTML = `<span class="dot ${dotClass}"></span>${what} &middot; ${esc(st.port)}
+  setHTML($("source"), `<span class="dot ${dotClass}"></span>${what} &middot; ${esc(shortPath(st.port))}
     (${esc(st.protocol)}) &rarr; ${esc(st.session.split(/[\\/]/).pop())} &middot;
-    ${num("samples", st.samples, st.samples.toLocaleString("en"))} rows`;
+    ${num("samples", st.samples, st.samples.toLocaleString("en"))} rows`);
   const s = st.stream;
   const age = s.since_last_s;
   const items = [
@@ -118,8 +138,8 @@ function header(st) {
      age !== null && age > 2 && st.status !== "finished"],
     ["reconnects", num("stream.reconnects", s.reconnects, s.reconnects), false],
   ];
-  $("health").innerHTML = items.map(([k, v, bad]) =>
-    `<span class="item${bad ? " bad" : ""}">${k} <b>${v}</b></span>`).join("");
+  setHTML($("health"), items.map(([k, v, bad]) =>
+    `<span class="item${bad ? " bad" : ""}">${k} <b>${v}</b></span>`).join(""));
 }
 
 function banner(s) {
@@ -139,12 +159,12 @@ function banner(s) {
   }
   b.className = "banner " + cls;
   b.dataset.kind = bn.kind;
-  b.textContent = text;
+  setText(b, text);
 }
 
 function guide(st) {
   const next = $("next");
-  next.textContent = st.next;
+  setText(next, st.next);
   const sensors = Object.keys(st.sensors).filter((k) => k === "accel" || k === "mag");
   const allReady = sensors.length > 0 && sensors.every((k) => st.sensors[k].ready);
   next.classList.toggle("all-good", allReady);
@@ -158,11 +178,11 @@ function guide(st) {
     steps.push(["Magnetometer: turn it slowly in every direction until its four numbers are green", st.sensors.mag.ready]);
   }
   steps.push(["Save calibration (then Export C header or Send to board)", false]);
-  $("steps").innerHTML = steps.map(([text, done], i) => {
+  setHTML($("steps"), steps.map(([text, done], i) => {
     let cls = done ? "done" : "";
     if (!done && !current && (i < steps.length - 1 || allReady)) { cls = "current"; current = true; }
     return `<li class="${cls}">${esc(text)}</li>`;
-  }).join("");
+  }).join(""));
   $("btnSave").classList.toggle("ready", allReady);
   $("btnSend").disabled = busy || !st.actions.send_possible;
   $("btnSend").title = st.actions.send_possible
@@ -194,30 +214,30 @@ function ensureCard(sensor) {
 function card(sensor, st) {
   const s = st.sensors[sensor], c = cards[sensor], n = c.node;
   const badge = n.querySelector(".ready-badge");
-  badge.textContent = s.ready ? "good: ready to save" : "not ready yet";
+  setText(badge, s.ready ? "good: ready to save" : "not ready yet");
   badge.classList.toggle("ok", s.ready);
   const hint = n.querySelector(".hint");
-  hint.textContent = s.hint.charAt(0).toUpperCase() + s.hint.slice(1);
+  setText(hint, s.hint.charAt(0).toUpperCase() + s.hint.slice(1));
   hint.classList.toggle("ok", s.ready);
   // checks: green / red against their limits
-  n.querySelector(".checks").innerHTML = s.quality.map((q, i) => {
-    const digits = q.unit === "" ? 0 : 1;
+  setHTML(n.querySelector(".checks"), s.quality.map((q, i) => {
+    const digits = q.unit === "" ? 0 : q.value < 1 ? 2 : 1;
     const lim = (q.op === ">=" ? "need \u2265 " : "good < ") + q.limit + (q.unit === "%" ? " %" : q.unit ? " " + q.unit : "");
     return `<div class="chk ${q.ok ? "ok" : "bad"}" title="${esc(q.help)}">
       <div class="n">${esc(q.name)} ${q.ok ? "\u2713" : "\u2717"}</div>
       <div class="v">${num(`sensors.${sensor}.quality.${i}.value`, q.value, fmt(q.value, digits))}${q.unit === "%" ? " %" : q.unit === "deg" ? "\u00b0" : ""}</div>
       <div class="l">${lim}</div></div>`;
-  }).join("");
+  }).join(""));
   // coverage
   const cov = s.coverage;
   drawCoverage(n.querySelector(".covmap"), cov, latestDirection(sensor, s));
   const cap = cov.empty_cap;
-  n.querySelector(".cov-text").innerHTML =
+  setHTML(n.querySelector(".cov-text"),
     `<b>${num(`sensors.${sensor}.coverage.pct`, cov.pct, fmt(cov.pct, 0))} %</b> of the sphere of directions covered<br>
      (${cov.cells_hit} of ${cov.cells_total} equal-area cells; green = hit)` +
-    (cap ? `<br>biggest empty region: <b>${esc(cap.words)}</b>, ${num(`sensors.${sensor}.coverage.empty_cap.deg`, cap.deg, fmt(cap.deg, 0))}\u00b0 across (orange)` : "");
+    (cap ? `<br>biggest empty region: <b>${esc(cap.words)}</b>, ${num(`sensors.${sensor}.coverage.empty_cap.deg`, cap.deg, fmt(cap.deg, 0))}\u00b0 across (orange)` : ""));
   // fit
-  n.querySelector(".fit").innerHTML = fitTable(sensor, s);
+  setHTML(n.querySelector(".fit"), fitTable(sensor, s));
   drawPrecision(n.querySelector(".precision"), s.precision);
 }
 
@@ -456,17 +476,19 @@ function schedule() {
   rafPending = true;
   requestAnimationFrame(() => {
     rafPending = false;
+    if (fresh) { T.painted += 1; fresh = false; }  // frames that showed new data
     const now = performance.now();
     for (const [sensor, c] of Object.entries(cards)) {
-      // redraw a view at most every 200 ms, or slower if drawing is slow on this machine
-      const gap = Math.max(200, 3 * (T.drawMs[sensor] || 0));
+      // redraw a view at most every 250 ms, or slower if drawing is slow on this machine
+      const gap = Math.max(250, 4 * (T.drawMs[sensor] || 0));
       if (c.dirty && now - c.lastDraw >= gap) {
         c.dirty = false;
         c.lastDraw = now;
         try { draw3d(sensor); } catch (e) { T.errors.push(String(e)); throw e; }
+        break;  // one 3D view per frame, so that the page stays responsive
       }
     }
-    if (Object.values(cards).some((c) => c.dirty)) setTimeout(schedule, 50);
+    if (Object.values(cards).some((c) => c.dirty)) setTimeout(schedule, 60);
   });
 }
 
@@ -481,11 +503,11 @@ function gyro(st) {
     el.innerHTML = `<h3>Gyroscope (rates, deg/s)</h3><div class="rates"></div>
       <canvas width="420" height="90"></canvas><div class="gbias muted"></div>`;
   }
-  el.querySelector(".rates").innerHTML = l ? AX.map((a, i) =>
+  setHTML(el.querySelector(".rates"), l ? AX.map((a, i) =>
     `${a} ${num(`sensors.gyro.latest.${i}`, l[i], fmt(l[i], 2))}`).join(" &nbsp; ") +
-    (still ? " &nbsp; <b>still</b>" : " &nbsp; moving") : "no data yet";
-  el.querySelector(".gbias").innerHTML = b ? `bias estimate from ${g.poses} still poses: ` + AX.map((a, i) =>
-    `${a} ${num(`sensors.gyro.bias_from_poses.${i}`, b[i], fmt(b[i], 3))}`).join(", ") + " deg/s (subtract it from the rates)" : "the bias appears after the first still pose";
+    (still ? " &nbsp; <b>still</b>" : " &nbsp; moving") : "no data yet");
+  setHTML(el.querySelector(".gbias"), b ? `bias estimate from ${g.poses} still poses: ` + AX.map((a, i) =>
+    `${a} ${num(`sensors.gyro.bias_from_poses.${i}`, b[i], fmt(b[i], 3))}`).join(", ") + " deg/s (subtract it from the rates)" : "the bias appears after the first still pose");
   const tr = T.points.trail;
   const cv = el.querySelector("canvas"), c = cv.getContext("2d"), W = cv.width, H = cv.height;
   c.clearRect(0, 0, W, H);
@@ -517,19 +539,20 @@ function stream(st) {
     ["cable pulls / reconnects", `${s.disconnects} / ${s.reconnects}`],
     ["seconds since the last frame", s.since_last_s === null ? "-" : fmt(s.since_last_s, 1)],
   ];
-  $("stream").innerHTML = rows.map(([k, v]) => `<div class="row"><span>${k}</span><b>${v}</b></div>`).join("");
-  $("events").innerHTML = s.events.slice().reverse().map((e) => {
+  setHTML($("stream"), rows.map(([k, v]) => `<div class="row"><span>${k}</span><b>${v}</b></div>`).join(""));
+  setHTML($("events"), s.events.slice().reverse().map((e) => {
     const cls = e.kind === "disconnected" || e.kind === "error" ? "bad" : e.kind === "reconnected" || e.kind === "resumed" ? "good" : "";
     return `<li class="${cls}">${new Date(e.time * 1000).toLocaleTimeString()}: ${esc(e.message)}</li>`;
-  }).join("");
+  }).join(""));
 }
 
 // ------------------------------------------------------------------ buttons
 let busy = false;
 function showAction(r) {
   const m = $("actionMsg");
-  m.className = "action-msg " + (r.ok ? "ok" : "err");
-  m.textContent = (r.ok ? "\u2713 " : "\u2717 ") + r.message;
+  const cls = "action-msg " + (r.ok ? "ok" : "err");
+  if (m.className !== cls) m.className = cls;
+  setText(m, (r.ok ? "\u2713 " : "\u2717 ") + r.message);
 }
 async function press(path, label) {
   if (busy) return;
