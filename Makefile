@@ -2,7 +2,7 @@
 PY ?= python3
 APT_PACKAGES := gcc-avr avr-libc qemu-system-misc chromium chromium-driver
 
-.PHONY: deps install test test-rust test-python lint stubs bench demo
+.PHONY: deps install test test-rust test-python lint stubs bench demo wheel wheel-check
 
 # Debian packages the tests need (the AVR firmware build and its QEMU run; the headless
 # browser of the live page's tests). Skipped when
@@ -30,8 +30,20 @@ lint:
 	$(PY) -m mypy python/triaxcal --ignore-missing-imports
 	$(PY) -m mypy.stubtest triaxcal._core
 
+# A wheel that installs without Rust: abi3 (CPython >= 3.9), manylinux2014 (glibc >= 2.17),
+# cross-linked with zig (the `ziglang` package from PyPI), plus the sdist, into dist/.
+wheel:
+	$(PY) -m pip install -q 'maturin>=1.7,<2' 'ziglang>=0.13'
+	rm -rf dist
+	maturin build --release --zig --compatibility manylinux2014 --out dist
+	maturin sdist --out dist
+
+# Install dist/'s wheel into a fresh venv with no Rust on PATH; run the quick start and the demo.
+wheel-check: wheel
+	PYTHON=$(PY) bash scripts/check_wheel.sh dist
+
 # Everything: the README's test command, and what CI runs.
-test: deps install test-rust lint test-python
+test: deps install test-rust lint test-python wheel-check
 
 bench:
 	$(PY) benches/bench_fit.py

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -17,3 +18,12 @@ def realdata() -> Path:
     """The folder of real recordings; the tests that use it fail loudly if it is missing."""
     assert REALDATA.is_dir(), f"real recordings not found at {REALDATA} (set TRIAXCAL_REALDATA)"
     return REALDATA
+
+
+def readme_section(heading: str) -> str:
+    """The README text under the level-2 heading that starts with ``heading``, up to the next
+    level-2 heading."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    m = re.search(rf"^## {re.escape(heading)}.*?$(.*?)(?=^## |\Z)", text, re.S | re.M)
+    assert m, f"README has no section '## {heading}'"
+    return m.group(1)

@@ -99,12 +99,10 @@ def test_demo_prints_a_table_with_units(tmp_path, capsys):
 
 def test_readme_capture_example_runs(tmp_path, monkeypatch):
     import re
-    from pathlib import Path
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    section = readme[readme.index("<!-- section: capture"):]
-    section = section[: section.index("<!-- /section -->")]
-    code = re.findall(r"```python\n(.*?)```", section, re.S)[0]
+    from conftest import readme_section
+
+    code = re.findall(r"```python\n(.*?)```", readme_section("Capture"), re.S)[0]
     monkeypatch.chdir(tmp_path)
     env: dict = {}
     exec(compile(code, "README.md", "exec"), env)

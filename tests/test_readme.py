@@ -5,18 +5,11 @@ from __future__ import annotations
 import re
 
 import numpy as np
-from conftest import ROOT
-
-
-def section(name: str) -> str:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    m = re.search(rf"<!-- section: {name} .*?-->(.*?)<!-- /section -->", text, re.S)
-    assert m, f"README section {name} missing"
-    return m.group(1)
+from conftest import ROOT, readme_section
 
 
 def test_quickstart_runs_and_recovers_the_offsets(capsys):
-    code = re.findall(r"```python\n(.*?)```", section("quickstart"), re.S)[0]
+    code = re.findall(r"```python\n(.*?)```", readme_section("Quick start"), re.S)[0]
     ns: dict = {}
     exec(compile(code, "README quick start", "exec"), ns)
     fit = ns["fit"]

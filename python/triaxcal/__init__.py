@@ -19,11 +19,15 @@ from .detect import (
 )
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .export import (
+    adafruit_calib_json,
+    ardupilot_parm,
     c_fixed_header,
     c_header,
     decode_motioncal,
     encode_motioncal,
+    kalibr_imu_yaml,
     motioncal_packet,
+    px4_params_file,
     write_outputs,
 )
 from .fit import (
@@ -40,6 +44,8 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .io.logs import read_log
+from .io.recording import LogRecording, Stream
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -69,6 +75,13 @@ from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "LogRecording",
+    "Stream",
+    "adafruit_calib_json",
+    "ardupilot_parm",
+    "kalibr_imu_yaml",
+    "px4_params_file",
+    "read_log",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",

@@ -1,8 +1,10 @@
-"""``triaxcal fit SESSION.csv --sensor {accel,gyro,mag} [--columns ...] [--model ...]
+"""``triaxcal fit SESSION.csv|LOG --sensor {accel,gyro,mag} [--columns ...] [--model ...]
 [--radius ...] -o CAL.json``: fit one sensor's readings and write (or update) a calibration file.
 
 Input: a session CSV from ``triaxcal capture`` (header ``t,ax,ay,az,...``) or any table of
-numbers -- comma, semicolon, tab or space separated, with or without a header row (detected).
+numbers -- comma, semicolon, tab or space separated, with or without a header row (detected);
+or a log: PX4 ``.ulg``, ArduPilot ``.bin``, ROS ``.bag`` / ``.db3`` / ``.mcap`` (``--instance``,
+``--topic``, ``--undo-autopilot-cal``; the raw unit is the log's).
 ``--columns`` picks three columns by name or zero-based index (``ax,ay,az`` or ``0,1,2``);
 by default the sensor's named columns, or the first three of a headerless file. ``--poses``
 first reduces a raw time series to still-pose means (:func:`triaxcal.detect.detect_poses`).
@@ -24,6 +26,7 @@ import numpy as np
 from ..calibration import SENSORS, Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..fit import MODELS
+from ._source import Source, add_source_options, autopilot_lines, autopilot_stats, load_source
 
 #: Default column names per sensor (the device channel order,
 #: :data:`triaxcal.io.protocol.CHANNELS_10`).
@@ -212,7 +215,8 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "9.80665, 48uT, 16384 (counts). Default for gyro/mag: the data's own")
     p.add_argument("--unit", default=None,
                    help="calibrated unit to record (default: from --radius)")
-    p.add_argument("--raw-unit", default="counts", help="unit of the raw readings (counts)")
+    p.add_argument("--raw-unit", default=None,
+                   help="unit of the raw readings (default: counts; a log's own unit)")
     p.add_argument("--sigma", type=float, default=2.0,
                    help="reject readings whose length is more than SIGMA standard deviations "
                         "from the mean (Magneto's rule), iterated; 0 disables (default 2)")
@@ -226,6 +230,7 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", type=int, default=25, help="pose detection window (samples)")
     p.add_argument("--units-per-g", type=float, default=16384.0,
                    help="accelerometer counts per g, for --poses (16384 at +-2 g)")
+    add_source_options(p)
 
 
 @dataclass
@@ -237,7 +242,8 @@ class FitOutcome:
     sensor: str
     rejected: np.ndarray
     reason: str | None
-    table: Table
+    table: Table | None
+    source: Source | None = None
 
 
 def _pose_points(table: Table, cols: list[int], args: argparse.Namespace) -> np.ndarray:
@@ -260,15 +266,15 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     from ..select import fit_robust
 
     sensor = args.sensor or "accel"
-    table = read_table(args.data)
-    cols = pick_columns(table, args.columns, sensor)
-    pts = _pose_points(table, cols, args) if args.poses else table.data[:, cols]
+    src = load_source(args.data, sensor, args)
+    table, pts = src.table, src.points
+    raw_unit = args.raw_unit or src.raw_unit or "counts"
     if args.radius is not None:
         radius, unit = parse_radius(args.radius, sensor)
     elif DEFAULT_RADIUS[sensor] is not None:
         radius, unit = DEFAULT_RADIUS[sensor]  # type: ignore[misc]
     else:
-        radius, unit = None, args.raw_unit
+        radius, unit = None, raw_unit
     if args.unit:
         unit = args.unit
     if args.rounds < 0:
@@ -276,7 +282,7 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     rob = fit_robust(pts, model=args.model, radius=radius, sigma=args.sigma,
                      max_rounds=args.rounds, lengths=args.reject_on)
     extra: dict[str, Any] = {
-        "columns": [table.names[c] if table.names else c for c in cols],
+        "columns": src.columns,
         "poses": bool(args.poses),
         "n_input": len(pts),
         "sigma": float(args.sigma),
@@ -287,18 +293,20 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         extra["units_per_g"] = float(args.units_per_g)
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
+    extra.update(src.extra)
+    extra.update(autopilot_stats(src, sensor))
     from ..report import coverage
 
     part = SensorCalibration.from_fit(
-        rob.fit, raw_unit=args.raw_unit, unit=unit, points=pts[rob.inliers],
-        rejected=rob.rejected, input_sha256=table.sha256, source=str(table.path),
+        rob.fit, raw_unit=raw_unit, unit=unit, points=pts[rob.inliers],
+        rejected=rob.rejected, input_sha256=src.sha256, source=str(src.path),
         extra_stats=extra,
     )
     stats = dict(part.stats)
     stats["coverage_pct"] = coverage(part.apply(pts[rob.inliers]))[1]
     part = SensorCalibration(**{**_fields(part), "stats": stats})
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
-                      reason=rob.model_reason, table=table)
+                      reason=rob.model_reason, table=table, source=src)
 
 
 def _fields(part: SensorCalibration) -> dict[str, Any]:
@@ -314,7 +322,8 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("data", metavar="SESSION.csv", help="session CSV or any numeric table")
+    p.add_argument("data", metavar="SESSION.csv|LOG",
+                   help="session CSV, any numeric table, or a log (.ulg, .bin, .bag, .db3, .mcap)")
     add_fit_options(p)
     p.add_argument("-o", "--output", required=True, metavar="CAL.json",
                    help="calibration file to write; an existing one keeps its other sensors")
@@ -360,4 +369,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"  model: {out.reason}")
     for w in s.get("warnings", []):
         print(f"  warning: {w}")
+    if out.source is not None and out.source.recording is not None:
+        for line in autopilot_lines(out.source, out.sensor, out.part.offset, out.part.matrix,
+                                    out.part.unit):
+            print(line)
+        for w in out.source.recording.meta.get("warnings", []):
+            print(f"  warning: {w}")
     return 0

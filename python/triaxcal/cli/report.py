@@ -1,4 +1,4 @@
-"""``triaxcal report SESSION.csv|CAL.json [--plot FIG.png]``: how good is a calibration?
+"""``triaxcal report SESSION.csv|LOG|CAL.json [--plot FIG.png]``: how good is a calibration?
 
 With a session / data file: fit it as ``triaxcal fit`` would (same options) and report. With a
 calibration file: report each part on its input data -- the file named in the calibration
@@ -16,7 +16,9 @@ from typing import Any
 
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
+from ..io.logs import is_log
 from ..report import QualityReport, plot_report, quality_report
+from ._source import load_source
 from .fit import add_fit_options, fit_file, pick_columns, read_table
 
 
@@ -54,7 +56,7 @@ def _find_source(cal_path: Path, part: SensorCalibration) -> Path | None:
         return None
     src = Path(part.source)
     for cand in (src, cal_path.parent / src, cal_path.parent / src.name):
-        if cand.is_file():
+        if cand.is_file() or (cand.is_dir() and is_log(cand)):
             return cand
     return None
 
@@ -79,6 +81,31 @@ def _stored_text(sensor: str, part: SensorCalibration) -> str:
     return "\n".join(lines)
 
 
+def _log_report(src: Path, part: SensorCalibration, sensor: str,
+                args: argparse.Namespace) -> tuple[QualityReport, Any]:
+    """Report ``part`` on the log it was fitted from, read with the options it was read with
+    (``stats["log"]``) unless given again on the command line."""
+    log = part.stats.get("log") or {}
+    same = argparse.Namespace(**vars(args))
+    if same.instance is None:
+        same.instance = log.get("instance")
+    if not same.topic and log.get("topic"):
+        same.topic = list(log["topic"])
+    same.undo_autopilot_cal = args.undo_autopilot_cal or bool(log.get("undo_autopilot_cal"))
+    same.poses = bool(part.stats.get("poses")) or args.poses
+    same.window = int(part.stats.get("pose_window", args.window))
+    data = load_source(src, sensor, same)
+    if args.data_file is None and part.input_sha256 not in (None, data.sha256):
+        raise CalibrationError(
+            f"{src} has changed since the calibration was made (SHA-256 differs): pass "
+            "--data FILE explicitly to judge the calibration on it anyway"
+        )
+    rej = part.stats.get("rejected") if data.sha256 == part.input_sha256 else None
+    if rej is None or (rej and max(rej) >= len(data.points)):
+        rej = []
+    return quality_report(data.points, part, sensor=sensor, rejected=rej), data.points
+
+
 def _plot_path(base: str, sensor: str, many: bool) -> Path:
     p = Path(base)
     return p.with_name(f"{p.stem}_{sensor}{p.suffix or '.png'}") if many else p
@@ -100,6 +127,15 @@ def run(args: argparse.Namespace) -> int:
                 if args.plot:
                     print(f"  (no figure for {sensor}: its data file {part.source!r} was not "
                           "found; pass --data FILE)", file=sys.stderr)
+                continue
+            if is_log(src):
+                rep, log_pts = _log_report(src, part, sensor, args)
+                reports[sensor] = rep
+                print(rep.text())
+                if args.plot:
+                    out = plot_report(log_pts, part,
+                                      _plot_path(args.plot, sensor, len(sensors) > 1), report=rep)
+                    print(f"  figure: {out}")
                 continue
             table = read_table(src)
             if args.data_file is None and part.input_sha256 not in (None, table.sha256):

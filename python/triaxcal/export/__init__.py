@@ -9,6 +9,14 @@ One module per target format:
   (Q7.24 matrix, int64 accumulation), and :func:`apply_fixed`, its bit-exact Python model.
 * :mod:`~triaxcal.export.motioncal` -- :func:`motioncal_packet`, the 68-byte PJRC MotionCal
   packet that Adafruit_Sensor_Calibration sketches accept.
+* :mod:`~triaxcal.export.ardupilot` -- :func:`ardupilot_parm`, ArduPilot ``COMPASS_*``,
+  ``INS_ACC*``, ``INS_GYR*``, ``INS_TCALn_*`` parameters (``.parm``).
+* :mod:`~triaxcal.export.px4` -- :func:`px4_params_file`, PX4 ``CAL_*`` and ``TC_*``
+  parameters as a QGroundControl ``.params`` file.
+* :mod:`~triaxcal.export.kalibr` -- :func:`kalibr_imu_yaml`, Kalibr's ``imu.yaml`` (topic,
+  rate, noise figures, intrinsics).
+* :mod:`~triaxcal.export.adafruit` -- :func:`adafruit_calib_json`,
+  Adafruit_Sensor_Calibration's ``sensor_calib.json``.
 * :func:`write_outputs` -- everything for a calibration into one folder (``triaxcal demo``).
 
 Error model of every export: ``calibrated = matrix @ (raw - offset)`` (the matrix
@@ -33,11 +41,25 @@ from ..io.motioncal import (
 from ..io.protocol import crc16_modbus
 from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ._cgen import _ident
+from .adafruit import adafruit_calib, adafruit_calib_json
+from .ardupilot import ardupilot_params, ardupilot_parm
 from .c import c_header
 from .c_fixed import FixedPoint, apply_fixed, c_fixed_header, fixed_point
+from .kalibr import KALIBR_MODELS, KALIBR_NOISE_KEYS, kalibr_imu_yaml, kalibr_intrinsics
 from .motioncal import motioncal_packet
+from .px4 import px4_params, px4_params_file
 
 __all__ = [
+    "KALIBR_MODELS",
+    "KALIBR_NOISE_KEYS",
+    "adafruit_calib",
+    "adafruit_calib_json",
+    "ardupilot_params",
+    "ardupilot_parm",
+    "kalibr_imu_yaml",
+    "kalibr_intrinsics",
+    "px4_params",
+    "px4_params_file",
     "DEVICE_COUNTS_PER_UNIT",
     "EXPORT_FORMATS",
     "FixedPoint",
@@ -57,7 +79,7 @@ __all__ = [
     "write_outputs",
 ]
 
-EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal")
+EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal", "ardupilot", "px4", "kalibr", "adafruit")
 
 
 def export(
@@ -67,8 +89,20 @@ def export(
     *,
     prefix: str = "triaxcal",
     counts_per_unit: Mapping[str, Any] | None = None,
+    **options: Any,
 ) -> Path:
-    """Write ``cal`` in format ``fmt`` (one of :data:`EXPORT_FORMATS`) to ``path``."""
+    """Write ``cal`` in format ``fmt`` (one of :data:`EXPORT_FORMATS`) to ``path``.
+
+    ``options`` go to the parameter writers: :func:`ardupilot_parm` (``imu``, ``compass``,
+    ``sensors``, ``compass_scale``, ``offsets_max``), :func:`px4_params_file` (``instance``,
+    ``sensors``, ``device_ids``, ``system_id``, ``component_id``), :func:`kalibr_imu_yaml`
+    (``topic``, ``rate_hz``, ``noise``, ``model``), :func:`adafruit_calib_json` (``sensors``).
+    """
+    if options and fmt not in _PARAM_WRITERS:
+        raise CalibrationError(
+            f"options {sorted(options)} apply to the parameter formats "
+            f"({', '.join(_PARAM_WRITERS)}), not to {fmt!r}"
+        )
     p = Path(path)
     if fmt == "c":
         p.write_text(c_header(cal, prefix=prefix), encoding="utf-8")
@@ -78,9 +112,20 @@ def export(
         p.write_text(cal.to_json(), encoding="utf-8")
     elif fmt == "motioncal":
         p.write_bytes(motioncal_packet(cal, counts_per_unit=counts_per_unit))
+    elif fmt in _PARAM_WRITERS:
+        text = _PARAM_WRITERS[fmt](cal, counts_per_unit=counts_per_unit, **options)
+        p.write_text(text, encoding="utf-8")
     else:
         raise CalibrationError(f"unknown export format {fmt!r}: use one of {EXPORT_FORMATS}")
     return p
+
+
+_PARAM_WRITERS: dict[str, Any] = {
+    "ardupilot": ardupilot_parm,
+    "px4": px4_params_file,
+    "kalibr": kalibr_imu_yaml,
+    "adafruit": adafruit_calib_json,
+}
 
 
 def write_outputs(

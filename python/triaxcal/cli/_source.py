@@ -1,0 +1,176 @@
+"""One way in for every command that reads a session: a table (CSV / whitespace) or a log.
+
+``.ulg`` (PX4), ``.bin`` (ArduPilot), ``.bag`` (ROS 1), ``.db3`` / ``.mcap`` / a bag folder
+(ROS 2) go to :func:`triaxcal.read_log`; everything else to the table reader. The options
+``--instance``, ``--topic`` and ``--undo-autopilot-cal`` choose what a log gives.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibrationError
+from ..io.logs import is_log, read_log
+from ..io.recording import LogRecording
+
+__all__ = ["Source", "add_source_options", "autopilot_lines", "load_source"]
+
+_G = {"m/s^2": 9.80665, "g": 1.0, "mg": 1000.0}
+
+
+@dataclass
+class Source:
+    """Readings of one sensor from a session file or a log."""
+
+    points: np.ndarray
+    path: Path
+    sha256: str
+    raw_unit: str | None = None
+    columns: list[Any] = field(default_factory=list)
+    table: Any = None
+    recording: LogRecording | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def add_source_options(p: argparse.ArgumentParser) -> None:
+    """``--instance``, ``--topic``, ``--undo-autopilot-cal`` (logs only)."""
+    p.add_argument("--instance", type=int, default=None, metavar="N",
+                   help="log: which sensor -- PX4 per-sensor topics sensor_accel/gyro/mag "
+                        "instance N (default: sensor_combined, vehicle_magnetometer); "
+                        "ArduPilot IMU/MAG (0), IMU2/MAG2 (1), ...")
+    p.add_argument("--topic", action="append", default=None, metavar="NAME",
+                   help="ROS bag: the sensor_msgs/Imu and/or MagneticField topic to read "
+                        "(repeat, or comma-separate, when the bag has several)")
+    p.add_argument("--undo-autopilot-cal", action="store_true",
+                   help="autopilot log: remove the calibration the autopilot applied (its "
+                        "CAL_* / COMPASS_* / INS_* parameters, with its own equation) so the "
+                        "fit sees the raw sensor")
+
+
+def file_sha256(path: Path) -> str:
+    """SHA-256 of a file (of a ROS 2 bag folder: of its files' names and bytes, sorted)."""
+    h = hashlib.sha256()
+    files = sorted(q for q in path.iterdir() if q.is_file()) if path.is_dir() else [path]
+    for q in files:
+        if path.is_dir():
+            h.update(q.name.encode() + b"\0")
+        with open(q, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Source:
+    """Readings of ``sensor`` from ``path`` as ``args`` (``--columns``, ``--poses``, the log
+    options) ask; the same for ``fit``, ``report`` and every command that takes a session."""
+    p = Path(path)
+    instance = getattr(args, "instance", None)
+    topic = getattr(args, "topic", None)
+    undo = bool(getattr(args, "undo_autopilot_cal", False))
+    if not is_log(p):
+        if instance is not None or topic or undo:
+            raise CalibrationError(
+                f"--instance, --topic and --undo-autopilot-cal apply to logs (.ulg, .bin, .bag, "
+                f".db3, .mcap); {p} is read as a table"
+            )
+        from .fit import _pose_points, pick_columns, read_table
+
+        table = read_table(p)
+        cols = pick_columns(table, getattr(args, "columns", None), sensor)
+        pts = _pose_points(table, cols, args) if getattr(args, "poses", False) else \
+            table.data[:, cols]
+        return Source(points=pts, path=p, sha256=table.sha256, table=table,
+                      columns=[table.names[c] if table.names else c for c in cols])
+    if getattr(args, "columns", None):
+        raise CalibrationError(f"--columns applies to tables; {p} is a log: choose the sensor "
+                               "with --sensor (and --instance / --topic)")
+    if not p.exists():
+        raise CalibrationError(f"log file {p} not found")
+    rec = read_log(p, instance=instance, topic=topic, undo_autopilot_cal=undo)
+    stream = rec.stream(sensor)
+    pts = stream.data
+    extra: dict[str, Any] = {"log": {
+        "format": rec.format, "stream": stream.name, "instance": instance,
+        "topic": list(topic) if topic else None, "undo_autopilot_cal": undo,
+        "calibrated_by_autopilot": stream.calibrated, "samples": len(stream),
+        "rate_hz": stream.rate_hz,
+    }}
+    if getattr(args, "poses", False):
+        pts = _log_pose_points(rec, sensor, args)
+    return Source(points=pts, path=p, sha256=file_sha256(p), raw_unit=stream.unit,
+                  columns=[f"{stream.name}:{sensor}"], recording=rec, extra=extra)
+
+
+def _log_pose_points(rec: LogRecording, sensor: str, args: argparse.Namespace) -> np.ndarray:
+    """Still-pose means of ``sensor``, poses found on the accelerometer stream."""
+    from ..detect import detect_poses
+
+    acc = rec.stream("accel")
+    per_g = _G.get(acc.unit)
+    if per_g is None:
+        raise CalibrationError(f"--poses needs the accelerometer in g or m/s^2; the log's is in "
+                               f"{acc.unit}")
+    if sensor == "accel":
+        data = acc.data
+    else:
+        _, sync = rec.synchronized(("accel", sensor))
+        data = np.hstack([sync["accel"], sync[sensor]])
+    det = detect_poses(data, window=args.window, units_per_g=per_g, columns=(0, 1, 2))
+    if len(det.poses) == 0:
+        raise CalibrationError(
+            f"no still poses found in {rec.source} (window {args.window} samples): the vehicle "
+            "must rest in each pose for a while, or drop --poses"
+        )
+    cols = [0, 1, 2] if sensor == "accel" else [3, 4, 5]
+    return np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
+
+
+def autopilot_lines(src: Source, sensor: str, offset: Any, matrix: Any, unit: str) -> list[str]:
+    """The autopilot's stored calibration beside the new fit, in triaxcal's convention."""
+    rec = src.recording
+    if rec is None or rec.autopilot is None or getattr(rec.autopilot, sensor) is None:
+        return []
+    ap = rec.autopilot.part(sensor)
+    stream = rec.stream(sensor)
+    o, m = ap.triaxcal_offset, ap.triaxcal_matrix
+    fo, fm = np.asarray(offset), np.asarray(matrix)
+    lines = [
+        f"  {ap.autopilot} stored calibration of this {sensor} ({ap.unit}): {ap.equation}",
+        "    in triaxcal's form calibrated = (raw - offset) @ matrix.T, in the frame the "
+        "autopilot corrects in:",
+        f"    {ap.autopilot:9s} offset [{_v(o)}] diag [{_v(np.diag(m))}] "
+        f"offdiag [{_v([m[0, 1], m[0, 2], m[1, 2]])}]",
+        f"    {'this fit':9s} offset [{_v(fo)}] diag [{_v(np.diag(fm))}] "
+        f"offdiag [{_v([fm[0, 1], fm[0, 2], fm[1, 2]])}] ({unit} per {ap.unit})",
+        f"    source: {ap.citation}",
+    ]
+    if stream.calibrated:
+        lines.append(
+            f"  note: {stream.name} was already calibrated by {ap.autopilot}, so this fit is a "
+            "correction on top of it; pass --undo-autopilot-cal to fit the raw sensor"
+        )
+    return lines
+
+
+def autopilot_stats(src: Source, sensor: str) -> dict[str, Any]:
+    """The autopilot's calibration, to record in the part's stats."""
+    rec = src.recording
+    if rec is None or rec.autopilot is None or getattr(rec.autopilot, sensor) is None:
+        return {}
+    ap = rec.autopilot.part(sensor)
+    return {"autopilot": {
+        "autopilot": ap.autopilot, "slot": ap.index, "unit": ap.unit,
+        "equation": ap.equation, "source": ap.citation,
+        "params": {k: float(v) for k, v in ap.params.items()},
+        "offset": ap.triaxcal_offset.tolist(), "matrix": ap.triaxcal_matrix.tolist(),
+    }}
+
+
+def _v(values: Any) -> str:
+    return ", ".join(f"{float(x):.6g}" for x in np.ravel(values))

@@ -1,0 +1,202 @@
+"""Shared by the parameter exports (ArduPilot, PX4, Kalibr, Adafruit): unit conversion to the
+consumer's units, the checks of what a format can hold, and number formatting.
+
+A part calibrates ``calibrated = (raw - offset) @ matrix.T`` with ``raw`` in ``raw_unit`` and
+``calibrated`` in ``unit``. A consumer sees ``raw_c = k * raw`` (its driver's units) and wants
+``calibrated_c = c * calibrated``; then ``calibrated_c = (raw_c - k * offset) @ (c / k *
+matrix).T``. ``k`` comes from the units (or, for raw counts, from the driver's counts per unit,
+as for the MotionCal packet); ``c`` from ``unit`` (or ``c = k`` when the part kept the data's
+own scale, ``unit == raw_unit``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..calibration import Calibration, SensorCalibration
+from ..errors import CalibrationError
+from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
+
+__all__ = ["Physical", "f32", "physical", "pick_sensors"]
+
+_FLOAT32_MAX = 3.4028234663852886e38
+
+
+@dataclass(frozen=True)
+class Physical:
+    """A part in the consumer's units: ``calibrated = (raw - offset) @ matrix.T``.
+
+    ``offset_poly`` / ``gain_poly`` are the temperature terms (``None`` without), in
+    ``dT = T - temp_ref_c``; ``offset_poly`` in the consumer's raw unit.
+    """
+
+    sensor: str
+    offset: np.ndarray
+    matrix: np.ndarray
+    raw_unit: str
+    unit: str
+    radius: float | None
+    temp_ref_c: float | None = None
+    temp_range_c: tuple[float, float] | None = None
+    offset_poly: np.ndarray | None = None
+    gain_poly: np.ndarray | None = None
+
+    def apply(self, raw: Any, temperature: Any = None) -> np.ndarray:
+        d = np.asarray(raw, float) - self.offset
+        if self.offset_poly is not None:
+            dt = np.asarray(temperature, float).reshape(-1, 1) - float(self.temp_ref_c or 0.0)
+            powers = dt ** np.arange(len(self.offset_poly))
+            d = d - powers @ self.offset_poly
+            if self.gain_poly is not None:
+                d = d * (1.0 + (dt ** np.arange(len(self.gain_poly))) @ self.gain_poly)
+        return d @ self.matrix.T
+
+
+def physical(part: SensorCalibration, sensor: str, raw_unit: str, unit: str,
+             counts_per_unit: Mapping[str, Any] | None = None, *, fmt: str) -> Physical:
+    """``part`` converted to a consumer whose raw readings are in ``raw_unit`` and whose
+    calibrated readings are in ``unit`` (see the module docstring)."""
+    if part.raw_unit == "counts":
+        spec = (counts_per_unit or {}).get(sensor, DEVICE_COUNTS_PER_UNIT[sensor])
+        if isinstance(spec, (int, float)):
+            spec = (float(spec), DEVICE_COUNTS_PER_UNIT[sensor][1])
+        try:
+            cpu, cpu_unit = float(spec[0]), str(spec[1])
+        except (TypeError, ValueError, IndexError):
+            raise CalibrationError(f"counts per unit for {sensor} must be (number, unit), "
+                                   f"got {spec!r}") from None
+        if not (math.isfinite(cpu) and cpu > 0):
+            raise CalibrationError(f"counts per unit for {sensor} must be positive, got {cpu}")
+        k = unit_factor(cpu_unit, raw_unit) / cpu
+    else:
+        k = _factor(part.raw_unit, raw_unit, sensor, fmt, "raw")
+    c = k if part.unit == part.raw_unit else _factor(part.unit, unit, sensor, fmt, "calibrated")
+    radius = part.radius if part.radius is not None else part.stats.get("radius")
+    t = part.temperature
+    return Physical(
+        sensor=sensor,
+        offset=np.asarray(part.offset) * k,
+        matrix=np.asarray(part.matrix) * (c / k),
+        raw_unit=raw_unit,
+        unit=unit,
+        radius=None if radius is None else float(radius) * c,
+        temp_ref_c=None if t is None else t.temp_ref_c,
+        temp_range_c=None if t is None else t.temp_range_c,
+        offset_poly=None if t is None else np.asarray(t.offset_poly) * k,
+        gain_poly=None if t is None or t.gain_poly is None else np.asarray(t.gain_poly),
+    )
+
+
+def _factor(src: str, dst: str, sensor: str, fmt: str, what: str) -> float:
+    try:
+        return unit_factor(src, dst)
+    except CalibrationError:
+        raise CalibrationError(
+            f"{fmt} needs the {sensor} {what} readings in {dst}, but this calibration's {what} "
+            f"unit is {src!r}, which cannot be converted to it; refit with readings in a "
+            "physical unit (or counts with --counts-per-unit)"
+        ) from None
+
+
+def pick_sensors(cal: Calibration, sensors: Iterable[str] | None, supported: tuple[str, ...],
+                 fmt: str) -> tuple[str, ...]:
+    """The parts to export: ``sensors`` (checked) or every part ``fmt`` supports."""
+    if sensors is None:
+        chosen = tuple(s for s in cal.sensors if s in supported)
+    else:
+        chosen = tuple(dict.fromkeys(sensors))
+        for s in chosen:
+            if s not in supported:
+                raise CalibrationError(f"{fmt} holds no {s} calibration (it holds: "
+                                       f"{', '.join(supported)})")
+            cal.part(s)  # a clear error when missing
+    if not chosen:
+        raise CalibrationError(f"this calibration has none of the parts {fmt} holds "
+                               f"({', '.join(supported)}); it has: {', '.join(cal.sensors)}")
+    return chosen
+
+
+def require_diagonal(p: Physical, fmt: str, what: str, *, rel: float = 1e-9) -> np.ndarray:
+    """The diagonal of ``p.matrix``; refuses any off-diagonal term a per-axis format drops."""
+    m = p.matrix
+    off = np.abs(m - np.diag(np.diag(m))).max()
+    if off > rel * np.abs(np.diag(m)).max():
+        raise CalibrationError(
+            f"{fmt} stores only per-axis {p.sensor} scales ({what}); this calibration has "
+            f"cross-axis terms up to {off:.3g} {p.unit} per {p.raw_unit} that it would drop: "
+            "refit with --model axis (or sphere), or export another format"
+        )
+    return np.diag(m).copy()
+
+
+def require_identity(p: Physical, fmt: str, *, rel: float = 1e-9) -> None:
+    """Refuses a gain matrix other than 1 where the format stores offsets only."""
+    dev = np.abs(p.matrix - np.eye(3)).max()
+    if dev > rel:
+        raise CalibrationError(
+            f"{fmt} applies no {p.sensor} gains (offsets only), but this calibration's gains "
+            f"in {p.unit} per {p.raw_unit} differ from 1 by up to {dev:.3g}; it would drop "
+            "them: export only the other sensors (--sensors), or use another format"
+        )
+
+
+def require_symmetric(p: Physical, fmt: str, *, rel: float = 1e-12) -> None:
+    m = p.matrix
+    asym = np.abs(m - m.T).max()
+    if asym > rel * np.abs(m).max():
+        raise CalibrationError(
+            f"{fmt} stores a symmetric {p.sensor} matrix (one value per off-diagonal pair); "
+            f"this calibration's matrix is not symmetric (differs by {asym:.3g}): refit with "
+            "a symmetric model (sphere, axis, full)"
+        )
+
+
+def require_no_gain_poly(p: Physical, fmt: str) -> None:
+    if p.gain_poly is not None and np.any(p.gain_poly != 0):
+        raise CalibrationError(
+            f"{fmt} corrects {p.sensor} temperature effects with offsets only; this calibration "
+            "also has temperature-dependent gains (gain_poly) that it would drop: refit the "
+            "temperature model with offsets only"
+        )
+
+
+def require_degree(p: Physical, fmt: str, max_degree: int) -> None:
+    if p.offset_poly is not None and len(p.offset_poly) - 1 > max_degree:
+        raise CalibrationError(
+            f"{fmt} holds temperature polynomials up to degree {max_degree}; this calibration's "
+            f"{p.sensor} offset polynomial has degree {len(p.offset_poly) - 1}: refit with "
+            f"degree <= {max_degree}"
+        )
+
+
+def shift_poly(poly: np.ndarray, shift: float) -> np.ndarray:
+    """Coefficients of ``q(x) = p(x + shift)`` (lowest order first; rows are per-axis)."""
+    n = len(poly)
+    out = np.zeros_like(np.asarray(poly, float))
+    for k in range(n):
+        for j in range(k + 1):
+            out[j] += poly[k] * math.comb(k, j) * shift ** (k - j)
+    return out
+
+
+def f32(value: Any, name: str) -> str:
+    """``value`` as text that reads back as the nearest float32 (9 significant digits),
+    refusing NaN, inf and values a float32 parameter cannot hold."""
+    v = float(value)
+    if not math.isfinite(v) or abs(v) > _FLOAT32_MAX:
+        raise CalibrationError(f"{name} = {v!r} cannot be stored in a float parameter")
+    if v == 0:
+        return "0"
+    return f"{v:.9g}"
+
+
+def check_range(value: float, lo: float, hi: float, name: str, why: str) -> float:
+    """``value`` if ``lo <= value <= hi`` (inclusive), else a CalibrationError saying ``why``."""
+    if not (lo <= value <= hi):
+        raise CalibrationError(f"{name} = {value:.6g} is outside {lo:g}..{hi:g}: {why}")
+    return value

@@ -1,0 +1,203 @@
+"""PX4 parameters: ``CAL_ACCn_*``, ``CAL_GYROn_*``, ``CAL_MAGn_*`` and ``TC_*`` thermal terms,
+as a QGroundControl parameter file (``.params``).
+
+The equations PX4 applies (``src/lib/sensor_calibration/Accelerometer.hpp``,
+``Gyroscope.hpp``, ``Magnetometer.hpp``, ``Correct()``; the same are in
+:mod:`triaxcal.io.logs.autopilot`), in the sensor frame before the rotation to the body::
+
+    accel = (raw - thermal(T) - CAL_ACCn_OFF) * CAL_ACCn_SCALE        (m/s^2)
+    gyro  =  raw - thermal(T) - CAL_GYROn_OFF                          (rad/s, no scale)
+    mag   = S @ (raw - CAL_MAGn_OFF)                                   (gauss)
+    S = [[XSCALE, XODIAG, YODIAG], [XODIAG, YSCALE, ZODIAG], [YODIAG, ZODIAG, ZSCALE]]
+
+Offsets are SUBTRACTED; scales MULTIPLY. ``Magnetometer::set_offdiagonal`` puts ``XODIAG``
+at (0,1)/(1,0), ``YODIAG`` at (0,2)/(2,0), ``ZODIAG`` at (1,2)/(2,1); ``set_scale`` accepts only
+positive scales. Thermal terms (``src/modules/temperature_compensation/
+TemperatureCompensation.cpp`` ``calc_thermal_offsets_3D``)::
+
+    thermal(T) = X0 + X1 dT + X2 dT^2 + X3 dT^3,  dT = clamp(T, TMIN, TMAX) - TREF
+
+per axis (``TC_A0_X1_2`` is the first-order term of axis z), applied to the sensor whose
+device id is ``TC_A0_ID`` when ``TC_A_ENABLE = 1``. triaxcal writes ``TREF`` = its reference
+temperature, ``X0 = 0`` (the constant is in ``CAL_*_OFF``) and ``TMIN``/``TMAX`` = the fitted
+range; PX4 holds the correction constant outside it, triaxcal extrapolates.
+
+The file is QGroundControl's parameter file: ``#`` comments and tab-separated lines
+``vehicle-id  component-id  name  value  type`` (``type`` a MAV_PARAM_TYPE: 9 float, 6 int32),
+which QGroundControl's parameter editor loads (``src/FactSystem/ParameterManager.cc``
+``readParametersFromStream``; newer versions ``ParameterEditorController::buildDiffFromFile``)
+and Mission Planner reads too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+
+from .._core import __version__
+from ..calibration import Calibration
+from ..errors import CalibrationError
+from ._params import (
+    Physical,
+    f32,
+    physical,
+    pick_sensors,
+    require_degree,
+    require_diagonal,
+    require_identity,
+    require_no_gain_poly,
+    require_symmetric,
+)
+from .ardupilot import _comment
+
+__all__ = ["MAV_PARAM_TYPE_INT32", "MAV_PARAM_TYPE_REAL32", "px4_params", "px4_params_file"]
+
+FMT = "PX4"
+MAV_PARAM_TYPE_INT32 = 6
+MAV_PARAM_TYPE_REAL32 = 9
+_CAL = {"accel": "ACC", "gyro": "GYRO", "mag": "MAG"}
+_TC = {"accel": "A", "gyro": "G", "mag": "M"}
+_UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
+
+
+def _device_id(device_ids: Mapping[str, Any] | None, sensor: str) -> int | None:
+    if not device_ids or device_ids.get(sensor) is None:
+        return None
+    v = device_ids[sensor]
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 < int(v) < 2**32:
+        raise CalibrationError(f"device id of the {sensor} must be a positive 32-bit whole "
+                               f"number (the CAL_*_ID value), got {v!r}")
+    return int(v)
+
+
+def _positive(values: np.ndarray, name: str) -> np.ndarray:
+    for i, a in enumerate("XYZ"):
+        if not values[i] > 0:
+            raise CalibrationError(
+                f"{name.format(a=a)} = {values[i]:.6g}: PX4 accepts only positive scales "
+                "(set_scale); a reflected axis means a sign or orientation error in the data"
+            )
+    return values
+
+
+def px4_params(
+    cal: Calibration,
+    *,
+    instance: int = 0,
+    sensors: Iterable[str] | None = None,
+    counts_per_unit: Mapping[str, Any] | None = None,
+    device_ids: Mapping[str, int] | None = None,
+) -> list[tuple[str, float, int]]:
+    """PX4 parameters ``(name, value, MAV_PARAM_TYPE)`` for the parts of ``cal``.
+
+    Parameters
+    ----------
+    cal : Calibration
+        Readings in (or convertible to) PX4's units: m/s^2, rad/s, gauss, in the sensor frame
+        (PX4 rotates after the correction; ``read_log(..., instance=N)`` on a PX4 v1.12+ log
+        gives such readings).
+    instance : int
+        The calibration slot ``n`` of ``CAL_ACCn_*`` etc. (0..3).
+    sensors : iterable of str, optional
+        Which parts to write (default: every part present).
+    counts_per_unit : dict, optional
+        The driver's scale for parts in raw counts.
+    device_ids : dict, optional
+        Device ids by sensor (``CAL_ACC0_ID`` of the vehicle): written as ``CAL_*n_ID``, and
+        required for thermal terms, which PX4 applies by ``TC_*n_ID``.
+
+    Returns
+    -------
+    list of (name, value, type)
+        ``type`` is ``MAV_PARAM_TYPE_REAL32`` (9) or ``MAV_PARAM_TYPE_INT32`` (6).
+    """
+    chosen = pick_sensors(cal, sensors, ("accel", "gyro", "mag"), FMT)
+    if isinstance(instance, bool) or not isinstance(instance, int) or not 0 <= instance <= 3:
+        raise CalibrationError(f"instance must be 0..3 (PX4's calibration slots), got {instance!r}")
+    n = instance
+    out: list[tuple[str, float, int]] = []
+    real, i32 = MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32
+    for sensor in chosen:
+        s, tc = _CAL[sensor], _TC[sensor]
+        p: Physical = physical(cal.part(sensor), sensor, _UNITS[sensor], _UNITS[sensor],
+                               counts_per_unit, fmt=FMT)
+        dev = _device_id(device_ids, sensor)
+        if dev is not None:
+            out.append((f"CAL_{s}{n}_ID", float(dev), i32))
+        offset = p.offset
+        for i, a in enumerate("XYZ"):
+            out.append((f"CAL_{s}{n}_{a}OFF", float(offset[i]), real))
+        if sensor == "accel":
+            scale = _positive(require_diagonal(p, FMT, f"CAL_ACC{n}_xSCALE"),
+                              f"CAL_ACC{n}_{{a}}SCALE")
+            for i, a in enumerate("XYZ"):
+                out.append((f"CAL_ACC{n}_{a}SCALE", float(scale[i]), real))
+        elif sensor == "gyro":
+            require_identity(p, FMT)
+        else:
+            require_symmetric(p, FMT)
+            m = p.matrix
+            _positive(np.diag(m).copy(), f"CAL_MAG{n}_{{a}}SCALE")
+            for i, a in enumerate("XYZ"):
+                out.append((f"CAL_MAG{n}_{a}SCALE", float(m[i, i]), real))
+            for (i, j), a in zip(((0, 1), (0, 2), (1, 2)), "XYZ"):
+                out.append((f"CAL_MAG{n}_{a}ODIAG", float(m[i, j]), real))
+        if p.offset_poly is None:
+            # fitted without thermal terms: the vehicle's own would be subtracted on top
+            out.append((f"TC_{tc}_ENABLE", 0.0, i32))
+            continue
+        require_no_gain_poly(p, FMT)
+        require_degree(p, FMT, 3)
+        if dev is None:
+            raise CalibrationError(
+                f"PX4 applies thermal terms TC_{tc}{n}_* only to the sensor whose device id is "
+                f"TC_{tc}{n}_ID: pass device_ids={{'{sensor}': <CAL_{s}{n}_ID of the vehicle>}} "
+                "(--device-id on the command line)"
+            )
+        poly = np.zeros((4, 3))
+        poly[: len(p.offset_poly)] = p.offset_poly
+        lo, hi = p.temp_range_c or (p.temp_ref_c, p.temp_ref_c)
+        out += [(f"TC_{tc}_ENABLE", 1.0, i32), (f"TC_{tc}{n}_ID", float(dev), i32),
+                (f"TC_{tc}{n}_TREF", float(p.temp_ref_c or 0.0), real),
+                (f"TC_{tc}{n}_TMIN", float(lo or 0.0), real),
+                (f"TC_{tc}{n}_TMAX", float(hi or 0.0), real)]
+        for k in range(4):
+            for i in range(3):
+                out.append((f"TC_{tc}{n}_X{k}_{i}", float(poly[k, i]), real))
+    return out
+
+
+def px4_params_file(
+    cal: Calibration, *, system_id: int = 1, component_id: int = 1, **kwargs: Any
+) -> str:
+    """QGroundControl ``.params`` text of :func:`px4_params` (same keyword options).
+
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> part = tc.SensorCalibration(offset=[0.1, -0.2, 0.05], matrix=np.diag([1.01, 0.99, 1.0]),
+    ...                             raw_unit="m/s^2", unit="m/s^2")
+    >>> text = tc.px4_params_file(tc.Calibration(accel=part))
+    >>> [ln.split("\\t")[2:4] for ln in text.splitlines() if "XSCALE" in ln]
+    [['CAL_ACC0_XSCALE', '1.01']]
+    """
+    for name, v in (("system_id", system_id), ("component_id", component_id)):
+        if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 255:
+            raise CalibrationError(f"{name} must be a MAVLink id 1..255, got {v!r}")
+    params = px4_params(cal, **kwargs)
+    lines = [
+        f"# Onboard parameters for Vehicle {system_id}",
+        "#",
+        f"# Calibration written by triaxcal {__version__}; sensor id "
+        f"{_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
+        "# accel = (raw - thermal - CAL_ACCn_OFF) * CAL_ACCn_SCALE; gyro = raw - thermal - "
+        "CAL_GYROn_OFF; mag = S (raw - CAL_MAGn_OFF)",
+        "#",
+        "# Vehicle-Id Component-Id Name Value Type",
+    ]
+    for name, value, kind in params:
+        text = str(int(value)) if kind == MAV_PARAM_TYPE_INT32 else f32(value, name)
+        lines.append(f"{system_id}\t{component_id}\t{name}\t{text}\t{kind}")
+    return "\n".join(lines) + "\n"
