@@ -774,18 +774,18 @@ class LiveState:
         for sensor, out in outcomes.items():
             p = out.part
             st = p.stats
-            self._fits[sensor] = _Fit(
+            fit = _Fit(
                 model=str(p.model), offset=np.array(p.offset), matrix=np.array(p.matrix),
                 radius=float(p.radius if p.radius is not None else st["radius"]),
                 rms=float(st["rms"]), stderr=dict(st.get("stderr") or {}), n=int(st["n"]),
                 rejected=[int(i) for i in out.rejected], converged=bool(st["converged"]),
                 condition=st.get("condition"), reason=out.reason, source="session",
                 unit=p.unit)
+            self._fits[sensor] = fit
             self._fit_errors[sensor] = None
             self._derived_cache.clear()
             self._precision[sensor].append(
-                (time.time(), max(self._fits[sensor].stderr.get(f"offset_{a}", math.nan)
-                                  for a in "xyz")))
+                (time.time(), max(fit.stderr.get(f"offset_{a}", math.nan) for a in "xyz")))
             if sensor == "accel":
                 with self._lock:
                     self._final_points["accel"] = np.asarray(out.points, dtype=np.float64)
