@@ -390,7 +390,7 @@ def _spawn(args, cwd):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "python"))
     code = "import sys; from triaxcal.cli import main; sys.exit(main())"
     return subprocess.Popen([sys.executable, "-c", code, *args], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
 def _url_from(proc, timeout=120):
@@ -422,7 +422,8 @@ def test_capture_live_cli_serves_and_ctrl_c_saves_and_exits(tmp_path):
         try:
             url = _url_from(proc)
             err: list[str] = []
-            threading.Thread(target=_drain, args=(proc.stderr, err), daemon=True).start()
+            drain = threading.Thread(target=_drain, args=(proc.stderr, err), daemon=True)
+            drain.start()
             deadline = time.monotonic() + 120
             while True:
                 doc = json.loads(_get(url + "api/state")[2])
@@ -432,11 +433,13 @@ def test_capture_live_cli_serves_and_ctrl_c_saves_and_exits(tmp_path):
                 time.sleep(0.5)
             assert doc["status"] == "capturing" and doc["stream"]["dropped"] == 0
             proc.send_signal(signal.SIGINT)
-            out, _ = proc.communicate(timeout=60)
+            proc.wait(timeout=60)
+            drain.join(30)
         finally:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
+            proc.stderr.close()
     assert proc.returncode == 0, "".join(err)
     assert "stopped by Ctrl-C" in "".join(err)
     rows = len((tmp_path / "s.csv").read_text().splitlines()) - 1
@@ -452,7 +455,8 @@ def test_demo_live_ends_on_the_session_fit_and_lingers_until_ctrl_c(tmp_path):
     try:
         url = _url_from(proc)
         err: list[str] = []
-        threading.Thread(target=_drain, args=(proc.stderr, err), daemon=True).start()
+        drain = threading.Thread(target=_drain, args=(proc.stderr, err), daemon=True)
+        drain.start()
         deadline = time.monotonic() + 180
         while True:
             doc = json.loads(_get(url + "api/state")[2])
@@ -470,9 +474,11 @@ def test_demo_live_ends_on_the_session_fit_and_lingers_until_ctrl_c(tmp_path):
         time.sleep(1.0)
         assert proc.poll() is None  # still serving
         proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=60)
+        proc.wait(timeout=60)
+        drain.join(30)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+        proc.stderr.close()
     assert proc.returncode == 0

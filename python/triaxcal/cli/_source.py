@@ -121,7 +121,8 @@ def _log_pose_points(rec: LogRecording, sensor: str, args: argparse.Namespace) -
     else:
         _, sync = rec.synchronized(("accel", sensor))
         data = np.hstack([sync["accel"], sync[sensor]])
-    det = detect_poses(data, window=args.window, units_per_g=per_g, columns=(0, 1, 2))
+    det = detect_poses(data, window=args.window, units_per_g=per_g, columns=(0, 1, 2),
+                       threshold=getattr(args, "threshold_g", 0.07) * per_g)
     if len(det.poses) == 0:
         raise CalibrationError(
             f"no still poses found in {rec.source} (window {args.window} samples): the vehicle "

@@ -230,6 +230,11 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", type=int, default=25, help="pose detection window (samples)")
     p.add_argument("--units-per-g", type=float, default=16384.0,
                    help="accelerometer counts per g, for --poses (16384 at +-2 g)")
+    p.add_argument("--threshold-g", type=float, default=0.07, metavar="G",
+                   help="--poses: steady when no axis of the window mean moved by more than G "
+                        "g since the previous window (default 0.07, the seed's; a steadier "
+                        "board allows less, which keeps the start and end of moves out of the "
+                        "poses)")
     add_source_options(p)
 
 
@@ -252,7 +257,11 @@ def _pose_points(table: Table, cols: list[int], args: argparse.Namespace) -> np.
     names = table.names or ()
     acc = [names.index(c) for c in SENSOR_COLUMNS["accel"]] if all(
         c in names for c in SENSOR_COLUMNS["accel"]) else cols
-    det = detect_poses(table.data, window=args.window, units_per_g=args.units_per_g, columns=acc)
+    thr = getattr(args, "threshold_g", 0.07)
+    if not (isinstance(thr, float) and 0 < thr < 2):
+        raise CalibrationError(f"--threshold-g must lie between 0 and 2 g, got {thr}")
+    det = detect_poses(table.data, window=args.window, units_per_g=args.units_per_g,
+                       threshold=thr * args.units_per_g, columns=acc)
     if len(det.poses) == 0:
         raise CalibrationError(
             f"no still poses found in {table.path} (window {args.window} samples): hold the "
@@ -291,6 +300,7 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     if args.poses:
         extra["pose_window"] = int(args.window)
         extra["units_per_g"] = float(args.units_per_g)
+        extra["threshold_g"] = float(getattr(args, "threshold_g", 0.07))
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
     extra.update(src.extra)

@@ -44,7 +44,8 @@ def fit_argv(state: LiveState, sensor: str, session: str, output: str, *, new: b
             "--rounds", str(o.rounds)]
     if sensor == "accel":
         argv += ["--poses", "--window", str(o.window), "--units-per-g",
-                 repr(float(state.units_per_g)), "--radius", o.accel_radius]
+                 repr(float(state.units_per_g)), "--threshold-g", repr(float(o.threshold_g)),
+                 "--radius", o.accel_radius]
     elif o.mag_radius is not None:
         argv += ["--radius", o.mag_radius]
     argv += ["-o", output]

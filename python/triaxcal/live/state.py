@@ -73,9 +73,10 @@ class LiveOptions:
     The fit options are ``triaxcal fit``'s, with its defaults: ``model`` (``"auto"``: by BIC),
     ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius`` (as
     ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
-    ``window`` and ``units_per_g`` (pose detection, ``--poses``; ``None``: 16384 counts/g, or
-    8192 for MotionCal ``Raw:`` lines). ``gyro_counts_per_dps`` (``None``: 131, or 16 for
-    ``Raw:``) only scales the displayed rates. ``mag_buffer`` is the size of the magnetometer's
+    ``window``, ``units_per_g`` and ``threshold_g`` (pose detection: ``--poses``, ``--window``,
+    ``--units-per-g``, ``--threshold-g``; ``None``: 16384 counts/g, or 8192 for MotionCal
+    ``Raw:`` lines). ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
+    the displayed rates. ``mag_buffer`` is the size of the magnetometer's
     buffer of well-spread samples; ``refresh_hz`` how often the background thread refits and
     publishes. ``out_dir`` (default: the session's folder) receives ``calibration.json`` and
     the C headers, named with ``prefix``; ``send_timeout_s`` bounds the wait for a board's echo.
@@ -88,6 +89,7 @@ class LiveOptions:
     mag_radius: str | None = None
     window: int = 25
     units_per_g: float | None = None
+    threshold_g: float = 0.07
     gyro_counts_per_dps: float | None = None
     mag_buffer: int = 650
     refresh_hz: float = 10.0
@@ -114,6 +116,9 @@ class LiveOptions:
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise CalibrationError(f"{name} must be > 0, got {v!r}")
+        if not (isinstance(self.threshold_g, (int, float)) and 0 < self.threshold_g < 2):
+            raise CalibrationError(f"threshold_g must lie between 0 and 2 g, got "
+                                   f"{self.threshold_g!r}")
         if not (isinstance(self.refresh_hz, (int, float)) and 0.2 <= self.refresh_hz <= 50):
             raise CalibrationError(f"refresh_hz must lie in 0.2..50, got {self.refresh_hz!r}")
         if not (isinstance(self.send_timeout_s, (int, float)) and self.send_timeout_s > 0):
@@ -280,6 +285,7 @@ class LiveState:
         opts = self.options
         self.reset_row = self.rows
         self._detector = PoseDetector(window=opts.window, units_per_g=self.units_per_g,
+                                      threshold=float(opts.threshold_g) * self.units_per_g,
                                       columns=tuple(self.cols.get("accel", (0, 1, 2))))
         self._poses: list[np.ndarray] = []  # pose means, all channels
         self._accel_version += 1
@@ -580,6 +586,7 @@ class LiveState:
             "options": {"model": self.options.model, "sigma": self.options.sigma,
                         "rounds": self.options.rounds, "accel_radius": self.options.accel_radius,
                         "mag_radius": self.options.mag_radius, "window": self.options.window,
+                        "threshold_g": self.options.threshold_g,
                         "units_per_g": self.units_per_g, "mag_buffer": self.options.mag_buffer},
         }
         return doc, points

@@ -7,6 +7,7 @@ const T = (window.triaxcal = {
   messages: 0, applied: 0, painted: 0, draws: { accel: 0, mag: 0 }, drawMs: { accel: 0, mag: 0 },
   state: null, points: {}, errors: [],
   seen: [],  // [version, status, accelerometer poses, coverage %] of each state shown
+  banners: [],  // [kind, text] of the banners shown, in order
 });
 const NAMES = { accel: "Accelerometer", mag: "Magnetometer" };
 const AX = ["x", "y", "z"];
@@ -145,7 +146,7 @@ function header(st) {
 function banner(s) {
   const b = $("banner");
   const bn = s.banner;
-  if (!bn) { b.classList.add("hidden"); return; }
+  if (!bn) { b.classList.add("hidden"); b.dataset.kind = ""; return; }
   let cls = "warn", text = bn.message;
   if (bn.kind === "disconnected") {
     cls = "bad";
@@ -158,6 +159,7 @@ function banner(s) {
     text = "No data from the board: " + bn.message;
   }
   b.className = "banner " + cls;
+  if (b.dataset.kind !== bn.kind) T.banners.push([bn.kind, text]);
   b.dataset.kind = bn.kind;
   setText(b, text);
 }
@@ -441,18 +443,20 @@ function draw3d(sensor) {
     const rp = pts.filter((_, i) => !keep[i]);
     traces.push({ type: "scatter3d", mode: "markers", name: "rejected (outliers)",
       x: rp.map((p) => p[0]), y: rp.map((p) => p[1]), z: rp.map((p) => p[2]),
-      marker: { size: 5, color: "#000", symbol: "x" } });
+      marker: { size: 3, color: "#555", symbol: "cross" } });
   }
   if (fit && s.coverage.empty_cap) {
     traces.push(view === "cal" ? capRing(s.coverage.empty_cap, fit.radius, [0, 0, 0], I)
       : capRing(s.coverage.empty_cap, fit.radius, fit.offset, inv3(fit.matrix)));
   }
   if (s.latest) {
+    // the newest reading: a needle from the centre of the fit (just a marker before a fit)
     const p = map(s.latest);
-    const o = view === "cal" ? [0, 0, 0] : fit ? fit.offset : [0, 0, 0];
-    traces.push({ type: "scatter3d", mode: "lines+markers", name: "newest reading",
-      x: [o[0], p[0]], y: [o[1], p[1]], z: [o[2], p[2]],
-      line: { color: "#d62728", width: 5 }, marker: { size: [0, 8], color: "#d62728", symbol: "diamond" },
+    const o = view === "cal" ? [0, 0, 0] : fit ? fit.offset : null;
+    traces.push({ type: "scatter3d", mode: o ? "lines+markers" : "markers", name: "newest reading",
+      x: o ? [o[0], p[0]] : [p[0]], y: o ? [o[1], p[1]] : [p[1]], z: o ? [o[2], p[2]] : [p[2]],
+      line: { color: "#d62728", width: 5 },
+      marker: { size: o ? [0, 8] : 8, color: "#d62728", symbol: "diamond" },
       hovertemplate: "newest: %{x:.4g}, %{y:.4g}, %{z:.4g}<extra></extra>" });
   }
   const ax = (t) => ({ title: { text: t + " (" + unit + ")" }, showspikes: false, zeroline: false,
