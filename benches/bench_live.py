@@ -48,6 +48,12 @@ from triaxcal.live.state import _Fit
 from triaxcal.sim import SimIMU, globe_script
 
 NAMES = channel_names("framed", 10)
+#: Headless Chromium without a GPU: WebGL through SwiftShader, the rest of the page rastered by
+#: the CPU (SwiftShader rasterising the page itself costs far more than Skia does).
+BROWSER_FLAGS = ["--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                 "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--disable-gpu-rasterization", "--disable-accelerated-2d-canvas",
+                 "--window-size=1400,1400", "--no-first-run", "--disable-extensions"]
 N_PARAMS = {"sphere": 4, "axis": 6, "full": 9}
 
 
@@ -240,9 +246,7 @@ def _browser() -> Any:
         raise SystemExit("the capture part needs chromium and chromedriver (make deps)")
     o = Options()
     o.binary_location = chromium
-    for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
-              "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-              "--window-size=1400,1400", "--no-first-run", "--disable-extensions"):
+    for a in BROWSER_FLAGS:
         o.add_argument(a)
     d = webdriver.Chrome(options=o, service=Service(driver))
     d.set_page_load_timeout(240)

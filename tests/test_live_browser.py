@@ -69,6 +69,8 @@ def driver():
     opts.binary_location = CHROMIUM
     for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
               "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+              # the page itself rastered by the CPU (SwiftShader only for WebGL): much faster
+              "--disable-gpu-rasterization", "--disable-accelerated-2d-canvas",
               "--window-size=1400,1400", "--hide-scrollbars", "--no-first-run",
               "--disable-extensions", "--disable-background-networking", "--disable-sync",
               "--disable-component-update", "--disable-default-apps"):

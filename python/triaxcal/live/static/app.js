@@ -483,8 +483,9 @@ function schedule() {
     if (fresh) { T.painted += 1; fresh = false; }  // frames that showed new data
     const now = performance.now();
     for (const [sensor, c] of Object.entries(cards)) {
-      // redraw a view at most every 250 ms, or slower if drawing is slow on this machine
-      const gap = Math.max(250, 4 * (T.drawMs[sensor] || 0));
+      // redraw a view at most every 250 ms, and keep the 3D views to about a quarter of the
+      // page's time where drawing is slow (software WebGL), so the numbers stay live
+      const gap = Math.max(250, 8 * (T.drawMs[sensor] || 0));
       if (c.dirty && now - c.lastDraw >= gap) {
         c.dirty = false;
         c.lastDraw = now;
