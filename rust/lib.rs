@@ -14,6 +14,7 @@
 //! assert!((fit.offset[0] - 0.1).abs() < 1e-9);
 //! ```
 
+pub mod allan;
 pub mod batch;
 pub mod bounds;
 pub mod ellipsoid;

@@ -7,6 +7,7 @@ Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multi
 from . import sim
 from ._core import __version__
 from .calibration import Calibration, SensorCalibration, TemperatureTerms
+from .compare import CalibrationDiff, compare
 from .detect import (
     Pose,
     PoseDetection,
@@ -25,6 +26,7 @@ from .export import (
     c_header,
     decode_motioncal,
     encode_motioncal,
+    js_module,
     kalibr_imu_yaml,
     motioncal_packet,
     px4_params_file,
@@ -46,6 +48,9 @@ from .fit import (
 )
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
+from .io.tables import Table, read_table
+from .methods.allan import AllanAccumulator, AllanDeviation, allan
+from .methods.bootstrap import BootstrapIntervals, bootstrap
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -62,6 +67,7 @@ from .methods.imu import (
     TriadCalibration,
     calibrate_imu,
 )
+from .methods.noise import AxisNoise, NoiseFigures, kalibr_noise, noise_figures, plot_allan
 from .methods.static import (
     FerrarisCalibration,
     SixPosition,
@@ -71,10 +77,38 @@ from .methods.static import (
     tilt_rig,
 )
 from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .parts import (
+    fold_asa,
+    part_from_center,
+    part_from_gyro_gains,
+    part_from_temperature,
+    part_from_tilt_rig,
+)
+from .poses import PoseSettings, session_poses
 from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "AllanAccumulator",
+    "AllanDeviation",
+    "AxisNoise",
+    "BootstrapIntervals",
+    "CalibrationDiff",
+    "NoiseFigures",
+    "allan",
+    "bootstrap",
+    "compare",
+    "kalibr_noise",
+    "noise_figures",
+    "plot_allan",
+    "PoseSettings",
+    "session_poses",
+    "fold_asa",
+    "part_from_center",
+    "part_from_gyro_gains",
+    "part_from_temperature",
+    "part_from_tilt_rig",
+    "js_module",
     "LogRecording",
     "Stream",
     "adafruit_calib_json",
@@ -82,6 +116,8 @@ __all__ = [
     "kalibr_imu_yaml",
     "px4_params_file",
     "read_log",
+    "read_table",
+    "Table",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",

@@ -6,9 +6,9 @@ For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T
 * the residual ``|calibrated| - radius``: RMS in calibrated units and in % of the radius;
 * min / max / mean / std of the calibrated norms (the seeds' "descriptive statistics");
 * the standard error of every fitted coefficient (``offset_x``... ``offdiag_yz``);
-* coverage of the sphere: the share of 100 equal-area cells (10 bands of equal height in z,
-  each cut into 10 equal longitude sectors -- by Archimedes' theorem every cell has the same
-  area) that hold at least one calibrated direction;
+* coverage of the sphere: the share of the equal-area cells of :mod:`triaxcal.coverage` (the
+  measure ``capture``, ``demo`` and ``fit`` report too) that hold at least one calibrated
+  direction, of every reading given (rejected ones too: coverage says where the board went);
 * the outliers rejected before the fit, by index;
 * warnings in plain language, each with what to do; the largest empty regions of the sphere
   are found as the directions farthest from every reading and named in words ("the top of the
@@ -33,7 +33,10 @@ import numpy as np
 
 from ._validate import as_points
 from .calibration import SensorCalibration
+from .coverage import Coverage, coverage_warning, sphere_cells
+from .coverage import coverage as shared_coverage
 from .errors import CalibrationError
+from .units import per_unit
 
 __all__ = [
     "QualityReport",
@@ -45,8 +48,6 @@ __all__ = [
     "quality_report",
 ]
 
-N_BANDS = 10
-N_SECTORS = 10
 #: An empty cap of the sphere at least this wide (angular radius, degrees) is warned about.
 HOLE_DEG = 40.0
 
@@ -65,28 +66,21 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n == 0, 1.0, n)
 
 
-def coverage(
-    directions: Any, *, n_bands: int = N_BANDS, n_sectors: int = N_SECTORS
-) -> tuple[np.ndarray, float]:
-    """Hits per equal-area cell and the percentage of cells hit.
+def coverage(directions: Any) -> tuple[np.ndarray, float]:
+    """Hits per equal-area cell and the percentage of cells hit (the measure every command
+    reports: :func:`triaxcal.coverage.coverage`).
 
-    Cells: ``n_bands`` bands of equal height in ``z`` (equal area on the unit sphere) times
-    ``n_sectors`` equal longitude sectors. ``directions`` (N, 3) need not be unit length.
+    ``directions`` (N, 3) need not be unit length.
 
     Returns
     -------
-    counts : ndarray, shape (n_bands, n_sectors)
-        Readings per cell; band 0 is the bottom (-Z), sector 0 starts at longitude -180 deg.
+    counts : ndarray, shape (n_cells,)
+        Readings per cell, numbered as :class:`triaxcal.coverage.SphereCells`.
     percent : float
         Share of cells with at least one reading, in %.
     """
-    u = _unit(as_points(directions, name="directions"))
-    band = np.clip(((u[:, 2] + 1.0) / 2.0 * n_bands).astype(int), 0, n_bands - 1)
-    lon = np.arctan2(u[:, 1], u[:, 0])
-    sector = np.clip(((lon + np.pi) / (2 * np.pi) * n_sectors).astype(int), 0, n_sectors - 1)
-    counts = np.zeros((n_bands, n_sectors), dtype=np.int64)
-    np.add.at(counts, (band, sector), 1)
-    return counts, 100.0 * float(np.count_nonzero(counts)) / counts.size
+    cov = shared_coverage(directions)
+    return cov.counts, cov.percent
 
 
 def _fibonacci(n: int) -> np.ndarray:
@@ -218,6 +212,8 @@ class QualityReport:
     model_reason: str | None = None
     raw_unit: str = "counts"
     extra: dict[str, Any] = field(default_factory=dict)
+    #: Bootstrap intervals (:meth:`triaxcal.methods.bootstrap.BootstrapIntervals.as_dict`).
+    intervals: dict[str, Any] | None = None
 
     @property
     def uniformity(self) -> float:
@@ -247,12 +243,21 @@ class QualityReport:
         ]
         if self.model_reason:
             lines.append(f"  model choice    {self.model_reason}")
+        ci = (self.intervals or {}).get("coefficients") or {}
         if self.stderr:
-            lines.append("  standard errors")
+            lines.append("  standard errors" + (
+                f" and {round(100 * self.intervals['level'])} % bootstrap intervals "
+                f"({self.intervals['n_boot']} refits over {self.intervals['resample']})"
+                if ci and self.intervals else ""))
             for k, v in self.stderr.items():
                 unit = (self.raw_unit if k.startswith("offset") or k == "data_radius"
-                        else f"{u}/{self.raw_unit}" if u != self.raw_unit else "(ratio)")
-                lines.append(f"    {k:<12} {v:.3g} {unit}")
+                        else per_unit(u, self.raw_unit, short=True))
+                c = ci.get(k)
+                band = "" if c is None else (
+                    f"   [{c['lower']:.6g}, {c['upper']:.6g}]"
+                    + ("  <- wider than firmware needs" if (c["upper"] - c["lower"]) / 2
+                       > c["tolerance"] else ""))
+                lines.append(f"    {k:<12} {v:.3g} {unit}{band}")
         if self.rejected:
             shown = ", ".join(str(i) for i in self.rejected[:30])
             more = f", ... ({len(self.rejected)} in all)" if len(self.rejected) > 30 else ""
@@ -286,6 +291,7 @@ def quality_report(
     rejected: Sequence[int] | None = None,
     model_reason: str | None = None,
     temperature: Any = None,
+    intervals: Any = None,
 ) -> QualityReport:
     """Build the :class:`QualityReport` of calibration ``cal`` on raw readings ``points``.
 
@@ -304,6 +310,9 @@ def quality_report(
         Why the model was chosen (from :func:`triaxcal.select.fit_auto`).
     temperature : float or array_like, optional
         Temperatures (deg C) for parts with temperature terms.
+    intervals : BootstrapIntervals or dict, optional
+        Bootstrap intervals of the coefficients (:func:`triaxcal.bootstrap`), shown beside the
+        standard errors; wide ones are warned about. Default: ``cal.stats["intervals"]``.
 
     Returns
     -------
@@ -334,12 +343,20 @@ def quality_report(
     radius = part.radius if part.radius is not None else float(np.mean(nk))
     res = nk - radius
     rms = float(np.sqrt(np.mean(res**2)))
-    counts, cov = coverage(cal_pts[keep])
+    cov = shared_coverage(cal_pts)  # of the session: rejected readings were visited too
     holes = empty_regions(cal_pts[keep])
     stderr = dict(part.stats.get("stderr") or {})
     if fit is not None:
         stderr = fit.stderr_dict
     warnings = _warnings(part, fit, sensor, n, rej, rms / radius * 100, cov, holes, nk)
+    if intervals is None:
+        intervals = part.stats.get("intervals")
+    elif hasattr(intervals, "as_dict"):
+        intervals = intervals.as_dict()
+    if intervals is not None:
+        if not isinstance(intervals, dict) or not isinstance(intervals.get("coefficients"), dict):
+            raise CalibrationError("intervals must come from triaxcal.bootstrap")
+        warnings += [w for w in intervals.get("warnings", []) if w not in warnings]
     return QualityReport(
         sensor=sensor,
         unit=part.unit,
@@ -355,29 +372,28 @@ def quality_report(
         norm_mean=float(nk.mean()),
         norm_std=float(nk.std(ddof=1)),
         stderr={k: float(v) for k, v in stderr.items()},
-        coverage_pct=cov,
-        cells_hit=int(np.count_nonzero(counts)),
-        cells_total=int(counts.size),
+        coverage_pct=cov.percent,
+        cells_hit=cov.cells_hit,
+        cells_total=cov.n_cells,
         empty=[(c.tolist(), a, direction_words(c)) for c, a in holes],
         rejected=rej,
         warnings=warnings,
         model_reason=model_reason or part.stats.get("model_reason"),
+        intervals=intervals,
     )
 
 
 def _warnings(part: SensorCalibration, fit: Any, sensor: str | None, n: int, rej: list[int],
-              rms_pct: float, cov: float, holes: list, norms: np.ndarray) -> list[str]:
+              rms_pct: float, cov: Coverage, holes: list, norms: np.ndarray) -> list[str]:
     w: list[str] = []
     for c, ang in holes:
         w.append(
             f"{direction_words(c)} of the sphere is empty (no reading within {ang:.0f} deg of "
             f"it): {_hole_action(sensor, c)}, then fit again"
         )
-    if cov < 50:
-        w.append(
-            f"only {cov:.0f} % of the sphere is covered: tumble the board through many more "
-            "orientations (all six faces up and the corners in between)"
-        )
+    low = coverage_warning(cov, sensor)
+    if low:
+        w.append(low)
     if n - len(rej) < 30:
         w.append(
             f"only {n - len(rej)} readings were used: collect at least 30 (better 100+) spread "
@@ -542,17 +558,18 @@ def plot_report(
 
     # coverage map: Lambert cylindrical equal-area (x = longitude, y = z), cells are rectangles
     ax = fig.add_subplot(gs[2, 1])
-    cu = _unit(c[keep])
+    cu = _unit(c)  # every reading, as the coverage number
     counts, _ = coverage(cu)
-    lon_edges = np.linspace(-180, 180, N_SECTORS + 1)
-    z_edges = np.linspace(-1, 1, N_BANDS + 1)
-    shown = np.where(counts > 0, np.log1p(counts), np.nan)
     import matplotlib.colors as mcolors
+    from matplotlib.patches import Rectangle
 
-    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="#d9d9d9")
-    ax.pcolormesh(lon_edges, z_edges, np.ma.masked_invalid(shown), cmap=cmap,
-                  norm=mcolors.Normalize(vmin=0, vmax=max(np.nanmax(shown), 1.0)),
-                  edgecolors="white", linewidth=0.6)
+    cmap = matplotlib.colormaps["viridis"]
+    cnorm = mcolors.Normalize(vmin=0, vmax=max(float(np.log1p(counts.max())), 1.0))
+    for n_hits, (lo, hi, z_lo, z_hi) in zip(counts.tolist(), sphere_cells().rectangles()):
+        face = "#d9d9d9" if n_hits == 0 else cmap(cnorm(math.log1p(n_hits)))
+        for shift in (0.0, -360.0):  # a cell that runs past +180 deg shows on both edges
+            ax.add_patch(Rectangle((lo + shift, z_lo), hi - lo, z_hi - z_lo, facecolor=face,
+                                   edgecolor="white", linewidth=0.6))
     ax.scatter(np.degrees(np.arctan2(cu[:, 1], cu[:, 0])), cu[:, 2], s=4, c="k", alpha=0.5)
     for cen, _ang, words in rep.empty:
         lon = float(np.degrees(np.arctan2(cen[1], cen[0])))

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from ..errors import CalibrationError
 from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
+from ._poses import add_pose_options, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 
@@ -113,15 +115,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-mode-byte", action="store_true",
                    help="do not send the mode byte (P/B/F/T/R) that switches the firmware to "
                         "the protocol; for boards that stream by themselves")
-    p.add_argument("--window", type=_positive_int, default=25, metavar="N",
-                   help="pose detection: samples per averaging window (default 25)")
-    p.add_argument("--hold", type=_positive_int, default=4, metavar="W",
-                   help="pose detection: steady windows before a pose registers (default 4)")
-    p.add_argument("--counts-per-g", type=float, default=None, metavar="C",
-                   help="accelerometer units per g, for pose detection (default 16384; 8192 "
-                        "for raw; 1 if a text board prints g)")
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
+    add_pose_options(p)
     add_live_options(p)
     p.set_defaults(func=run)
 
@@ -129,8 +125,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.poll_hz is not None and not args.poll_hz > 0:
         raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
-    if args.counts_per_g is not None and not args.counts_per_g > 0:
-        raise CalibrationError(f"--counts-per-g must be > 0, got {args.counts_per_g}")
     if args.live:
         from ..live.server import check_live_extra
 
@@ -158,20 +152,20 @@ def run(args: argparse.Namespace) -> int:
             f"{len(names)} channels ({' '.join(names)}) -> {args.out}; Ctrl-C stops",
             file=out,
         )
-    kwargs = {"samples": args.samples, "poses": args.poses, "duration_s": args.seconds,
-              "units_per_g": args.counts_per_g, "window": args.window,
-              "hold_windows": args.hold, "bell": not args.no_bell}
+    kwargs: dict[str, Any] = {"samples": args.samples, "poses": args.poses,
+                              "duration_s": args.seconds, "bell": not args.no_bell}
+    detection = settings_from_args(args)
     if args.live:
         from ..live import LiveOptions
         from ..live.run import live_capture
 
         result = live_capture(
-            reader, args.out, columns=names, mode=mode,
-            options=LiveOptions(window=args.window, units_per_g=args.counts_per_g),
+            reader, args.out, columns=names, mode=mode, detection=detection,
+            options=LiveOptions(detection=detection),
             host=args.http_host, port=args.http_port, open_browser=not args.no_browser,
             progress=None if args.quiet else out, notices=out, **kwargs)
     else:
-        result = capture(reader, args.out, mode=mode, columns=names,
+        result = capture(reader, args.out, mode=mode, columns=names, detection=detection,
                          progress=None if args.quiet else out, **kwargs)
     st = result.stats
     d = st.decoder
@@ -179,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
            "poses": "pose count reached", "duration": "time is up", "stop": "stopped"}
     print(
         f"triaxcal capture: {why[result.stopped_by]}: {result.samples} rows, "
-        f"{len(result.poses)} poses, sphere {100 * result.coverage:.0f}% covered, saved to "
+        f"{len(result.poses)} poses, coverage {100 * result.coverage:.0f} %, saved to "
         f"{result.path} ({result.elapsed_s:.1f} s; dropped frames {d.dropped_frames}, "
         f"skipped lines {d.lines_skipped}, lost by sequence {d.lost_frames}, "
         f"reconnects {st.reconnects})",

@@ -74,11 +74,14 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("calibration", metavar="CAL.json")
+    p.add_argument("calibration", metavar="CAL.json",
+                   help="calibration file written by triaxcal fit (or Calibration.save)")
     p.add_argument("--port", required=True,
                    help="serial port (/dev/ttyUSB0, COM3) or a pyserial URL (loop://)")
-    p.add_argument("--baud", type=int, default=115200)
-    p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the echo")
+    p.add_argument("--baud", type=int, default=115200,
+                   help="baud rate of the board's serial port (default 115200)")
+    p.add_argument("--timeout", type=float, default=3.0,
+                   help="seconds to wait for the echo (default 3)")
     p.add_argument("--counts-per-unit", type=_scale, action="append", default=[],
                    metavar="SENSOR=COUNTS[:UNIT]",
                    help="the board driver's scale (default accel=16384:g, gyro=131:deg/s, "

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
-from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
+from ..units import DEVICE_COUNTS_PER_UNIT, per_unit, unit_factor
 
 __all__ = ["Physical", "f32", "physical", "pick_sensors"]
 
@@ -128,7 +128,7 @@ def require_diagonal(p: Physical, fmt: str, what: str, *, rel: float = 1e-9) -> 
     if off > rel * np.abs(np.diag(m)).max():
         raise CalibrationError(
             f"{fmt} stores only per-axis {p.sensor} scales ({what}); this calibration has "
-            f"cross-axis terms up to {off:.3g} {p.unit} per {p.raw_unit} that it would drop: "
+            f"cross-axis terms up to {off:.3g} {per_unit(p.unit, p.raw_unit)} that it would drop: "
             "refit with --model axis (or sphere), or export another format"
         )
     return np.diag(m).copy()
@@ -140,7 +140,7 @@ def require_identity(p: Physical, fmt: str, *, rel: float = 1e-9) -> None:
     if dev > rel:
         raise CalibrationError(
             f"{fmt} applies no {p.sensor} gains (offsets only), but this calibration's gains "
-            f"in {p.unit} per {p.raw_unit} differ from 1 by up to {dev:.3g}; it would drop "
+            f"in {per_unit(p.unit, p.raw_unit)} differ from 1 by up to {dev:.3g}; it would drop "
             "them: export only the other sensors (--sensors), or use another format"
         )
 

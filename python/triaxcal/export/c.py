@@ -8,9 +8,11 @@ Model: ``out = matrix * (raw - offset)`` (the matrix **multiplies**), with the p
 from __future__ import annotations
 
 from ..calibration import Calibration, SensorCalibration
+from ..units import per_unit
 from ._cgen import (
     _AX,
     _OFFD,
+    _c_comment,
     _c_poly_array,
     _cf,
     _fmt,
@@ -64,7 +66,7 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
         comment += [
             "",
             f"{sensor}: raw {part.raw_unit} -> calibrated {part.unit}; offset in "
-            f"{part.raw_unit}, matrix in {part.unit} per {part.raw_unit}"
+            f"{part.raw_unit}, matrix in {per_unit(part.unit, part.raw_unit)}"
             + (f"; radius {_fmt(part.radius)} {part.unit}" if part.radius else ""),
             *_stats_lines(part),
             f"test vector: {s}_apply({_vec(traw)}) -> {_vec(tout)} {part.unit}",
@@ -77,7 +79,7 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
                 "offset + sum_k offset_poly[k] * dT^k"
                 + ("; raw gain 1 + sum_k gain_poly[k] * dT^k" if t.gain_poly is not None else "")
             )
-        code.append(f"/* ---- {sensor}: {part.raw_unit} -> {part.unit} ---- */")
+        code.append(_c_comment(f"---- {sensor}: {part.raw_unit} -> {part.unit} ----"))
         for i, a in enumerate(_AX):
             code.append(f"#define {S}_OFFSET_{a} {_cf(part.offset[i])}")
         for i, a in enumerate(_AX):
@@ -98,7 +100,8 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
             (f"TRIAXCAL_UNUSED static const float {s}_test_out[3] = "
             f"{{{', '.join(_cf(v) for v in tout)}}};"),
             "",
-            f"/* out = matrix * (raw - offset): raw in {part.raw_unit}, out in {part.unit}. */",
+            _c_comment(f"out = matrix * (raw - offset): raw in {part.raw_unit}, out in "
+                       f"{part.unit}."),
             f"static inline void {s}_apply(const float raw[3], float out[3])",
             "{",
             f"    const float d0 = raw[0] - {s}_offset[0];",

@@ -23,6 +23,7 @@ from ..errors import CalibrationError
 from ._cgen import (
     _AX,
     _OFFD,
+    _c_comment,
     _c_poly_array,
     _fmt,
     _guard,
@@ -218,10 +219,10 @@ def c_fixed_header(
             (f"test vector: {s}_apply_q({_vec(traw)}) -> {_vec(texp)} "
             f"(exact {_vec(exact)})"),
         ]
-        code.append(
-            f"/* ---- {sensor}: int16_t {part.raw_unit} -> int32_t in 1/{_fmt(fp.out_scale)} "
-            f"{part.unit} ---- */"
-        )
+        code.append(_c_comment(
+            f"---- {sensor}: int16_t {part.raw_unit} -> int32_t in 1/{_fmt(fp.out_scale)} "
+            f"{part.unit} ----"
+        ))
         code.append(f"#define {S}_Q_FRAC_BITS {FRAC_BITS}")
         code.append(f"#define {S}_Q_OUT_SCALE_NUM {num}L")
         code.append(f"#define {S}_Q_OUT_SCALE_DEN {den}L")
@@ -247,7 +248,8 @@ def c_fixed_header(
             (f"TRIAXCAL_UNUSED static const int32_t {s}_q_test_out[3] = "
             f"{{{', '.join(_cl(int(v)) for v in texp)}}};"),
             "",
-            f"/* out = round(OUT_SCALE * matrix * (raw - offset)), raw int16_t {part.raw_unit}. */",
+            _c_comment(f"out = round(OUT_SCALE * matrix * (raw - offset)), raw int16_t "
+                       f"{part.raw_unit}."),
             f"static inline void {s}_apply_q(const int16_t raw[3], int32_t out[3])",
             "{",
             f"    const int32_t d0 = (int32_t)raw[0] - {s}_q_offset[0];",

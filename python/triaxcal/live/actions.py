@@ -1,9 +1,10 @@
 """The page's buttons, each the CLI command of the same name on the session being captured.
 
 * **Save calibration** = ``triaxcal fit SESSION --sensor accel --poses ... -o calibration.json
-  --new`` then ``triaxcal fit SESSION --sensor mag ... -o calibration.json`` (the commands are
-  built by :func:`fit_argv`, parsed by the CLI's own parser and run by its own
-  :func:`triaxcal.cli.fit.fit_file`), into the live options' ``out_dir``.
+  --new`` then ``triaxcal fit SESSION --sensor mag ... -o calibration.json``, into the live
+  options' ``out_dir``: the commands (:func:`fit_argv`) are run by the command line itself
+  (:func:`run_cli`), so every rule of ``fit`` applies (refusing an undetermined fit, keeping
+  the replaced calibration as ``previous``...).
 * **Export C header** = Save, then ``triaxcal export calibration.json --format c`` (or
   ``c-fixed``) ``-o <prefix>_calibration.h`` (``<prefix>_calibration_fixed.h``).
 * **Send to board** = Save, then ``triaxcal send calibration.json``: the 68-byte MotionCal
@@ -19,6 +20,8 @@ to ``<session>.after-reset-<k>.csv`` next to the session, which is then the file
 
 from __future__ import annotations
 
+import contextlib
+import io
 import threading
 import time
 from pathlib import Path
@@ -29,23 +32,55 @@ from ..errors import CalibrationError
 if TYPE_CHECKING:
     from ..calibration import Calibration
     from ..cli.fit import FitOutcome
+    from ..poses import PoseSettings
     from .state import LiveState
 
-__all__ = ["export_header", "fit_argv", "fit_session", "reset", "save", "send"]
+__all__ = ["export_header", "fit_argv", "fit_session", "pose_argv", "reset", "run_cli", "save",
+           "send"]
 
 _ACTION_LOCK = threading.Lock()
+
+
+def pose_argv(settings: PoseSettings) -> list[str]:
+    """The pose options (``--window``, ``--accel-threshold``...) that describe ``settings``,
+    those that differ from the defaults (the inverse of the CLI's ``settings_from_args``)."""
+    from ..cli._poses import default_settings
+
+    d = default_settings()
+    out: list[str] = []
+    if settings.window != d.window:
+        out += ["--window", str(settings.window)]
+    if settings.accel_threshold_g != d.accel_threshold_g:
+        out += ["--accel-threshold", repr(float(settings.accel_threshold_g))]
+    if settings.counts_per_g is not None:
+        out += ["--counts-per-g", repr(float(settings.counts_per_g))]
+    for name, use, thr in (("gyro", settings.use_gyro, settings.gyro_threshold),
+                           ("mag", settings.use_mag, settings.mag_threshold)):
+        text = "off" if not use else "auto" if thr is None else repr(float(thr))
+        if text != "auto":
+            out += [f"--{name}-threshold", text]
+    if settings.hold_windows != d.hold_windows:
+        out += ["--hold", "off" if settings.hold_windows is None else str(settings.hold_windows)]
+    if settings.holdoff_s != d.holdoff_s:
+        out += ["--holdoff", repr(float(settings.holdoff_s))]
+    if settings.rate_hz is not None:
+        out += ["--rate-hz", repr(float(settings.rate_hz))]
+    return out
 
 
 def fit_argv(state: LiveState, sensor: str, session: str, output: str, *, new: bool) -> list[str]:
     """The ``triaxcal fit`` arguments (without ``triaxcal``) that fit ``sensor`` of
     ``session`` with the live page's options."""
     o = state.options
-    argv = ["fit", session, "--sensor", sensor, "--model", o.model, "--sigma", repr(float(o.sigma)),
-            "--rounds", str(o.rounds)]
+    argv = ["fit", session, "--sensor", sensor]
+    if o.model != "auto":
+        argv += ["--model", o.model]
+    if o.sigma != 2.0:
+        argv += ["--sigma", repr(float(o.sigma))]
+    if o.rounds != 10:
+        argv += ["--rounds", str(o.rounds)]
     if sensor == "accel":
-        argv += ["--poses", "--window", str(o.window), "--units-per-g",
-                 repr(float(state.units_per_g)), "--threshold-g", repr(float(o.threshold_g)),
-                 "--radius", o.accel_radius]
+        argv += ["--poses", *pose_argv(state.detection), "--radius", o.accel_radius]
     elif o.mag_radius is not None:
         argv += ["--radius", o.mag_radius]
     argv += ["-o", output]
@@ -97,31 +132,45 @@ def fit_session(state: LiveState, output: str | None = None) -> dict[str, FitOut
     return outcomes
 
 
+def run_cli(argv: list[str]) -> tuple[int, str, str]:
+    """Run ``triaxcal ARGV`` in this process: ``(exit code, stdout, stderr)``.
+
+    Standard output and error are redirected while it runs (process-wide: nothing else of a
+    live capture prints to them; the capture's status line holds its own stream)."""
+    from ..cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    return rc, out.getvalue(), err.getvalue()
+
+
 def _save(state: LiveState) -> tuple[Calibration, Path, str]:
+    """``triaxcal fit`` of each sensor into calibration.json; raises with its messages."""
     from ..calibration import Calibration
 
     path = state.out_dir / "calibration.json"
-    outcomes = fit_session(state, str(path))
-    cal: Calibration | None = None
-    lines = []
-    for sensor, out in outcomes.items():
-        # as `triaxcal fit -o PATH --new` for the first sensor, then `-o PATH` (update)
-        part: dict[str, Any] = {sensor: out.part}
-        cal = Calibration(**part) if cal is None else cal.replace(**part)
-        s = out.part.stats
-        lines.append(
-            f"{sensor} ({out.part.raw_unit} -> {out.part.unit}), model {out.part.model}, "
-            f"{s['n']} readings used, {len(out.rejected)} rejected, residual RMS "
-            f"{s['rms']:.4g} {out.part.unit} ({s['rms_pct_of_radius']:.3g} % of radius), "
-            f"coverage {s['coverage_pct']:.0f} %")
-    assert cal is not None
+    if not state.session.exists():
+        raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")
     state.out_dir.mkdir(parents=True, exist_ok=True)
-    cal.save(path)
-    errs = getattr(state, "last_fit_errors", [])
-    msg = f"wrote {path}: " + "; ".join(lines)
-    if errs:
-        msg += " (not fitted: " + "; ".join(errs) + ")"
-    return cal, path, msg
+    data = str(_session_to_fit(state))
+    lines: list[str] = []
+    failed: list[str] = []
+    written = False
+    for sensor in ("accel", "mag"):
+        if sensor not in state.cols:
+            continue
+        rc, out, err = run_cli(fit_argv(state, sensor, data, str(path), new=not written))
+        said = " ".join(line.strip() for line in (out + err).splitlines() if line.strip())
+        if rc == 0:
+            written = True
+            lines.append(said)
+        else:
+            failed.append(f"{sensor}: {said}")
+    if not written:
+        raise CalibrationError("nothing saved: " + "; ".join(failed))
+    msg = " ".join(lines) + ("" if not failed else " (not saved: " + "; ".join(failed) + ")")
+    return Calibration.load(path), path, msg
 
 
 def _run(state: LiveState, action: str, fn: Any) -> dict[str, Any]:
@@ -151,7 +200,6 @@ def save(state: LiveState) -> dict[str, Any]:
 
 def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
     """Export C header: Save, then ``triaxcal export calibration.json --format FMT``."""
-    from ..export import export
     from ..export._cgen import _ident
 
     if fmt not in ("c", "c-fixed"):
@@ -162,9 +210,12 @@ def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
         cal, cal_path, msg = _save(state)
         prefix = _ident(state.options.prefix)
         name = f"{prefix}_calibration.h" if fmt == "c" else f"{prefix}_calibration_fixed.h"
-        out = export(cal, fmt, state.out_dir / name, prefix=prefix)
-        return {"message": f"{msg}; wrote {out} ({fmt}, {out.stat().st_size} bytes; sensors: "
-                           f"{', '.join(cal.sensors)})", "path": str(out)}
+        out = state.out_dir / name
+        rc, said, err = run_cli(["export", str(cal_path), "--format", fmt, "--prefix", prefix,
+                                 "-o", str(out)])
+        if rc != 0:
+            raise CalibrationError(f"{msg}; but the export failed: {err.strip()}")
+        return {"message": f"{msg}; {said.strip()}", "path": str(out)}
 
     return _run(state, f"export-{fmt}", go)
 

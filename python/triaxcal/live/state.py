@@ -39,9 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from ..detect import PoseDetector
 from ..errors import CalibrationError
 from ..fit import MODELS
+from ..io.capture import _LivePoses
+from ..poses import PoseSettings
 from .quality import MOTIONCAL_LIMITS, SpreadBuffer, biggest_empty_cap, motioncal_quality
 
 __all__ = ["SENSOR_COLUMNS", "LiveOptions", "LiveState"]
@@ -73,9 +74,9 @@ class LiveOptions:
     The fit options are ``triaxcal fit``'s, with its defaults: ``model`` (``"auto"``: by BIC),
     ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius`` (as
     ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
-    ``window``, ``units_per_g`` and ``threshold_g`` (pose detection: ``--poses``, ``--window``,
-    ``--units-per-g``, ``--threshold-g``; ``None``: 16384 counts/g, or 8192 for MotionCal
-    ``Raw:`` lines). ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
+    ``detection`` (the pose detection of ``capture`` and ``fit --poses``,
+    :class:`~triaxcal.poses.PoseSettings`; ``None``: the command line's defaults).
+    ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
     the displayed rates. ``mag_buffer`` is the size of the magnetometer's
     buffer of well-spread samples; ``refresh_hz`` how often the background thread refits and
     publishes. ``out_dir`` (default: the session's folder) receives ``calibration.json`` and
@@ -87,9 +88,7 @@ class LiveOptions:
     rounds: int = 10
     accel_radius: str = "1g"
     mag_radius: str | None = None
-    window: int = 25
-    units_per_g: float | None = None
-    threshold_g: float = 0.07
+    detection: PoseSettings | None = None
     gyro_counts_per_dps: float | None = None
     mag_buffer: int = 650
     refresh_hz: float = 10.0
@@ -105,20 +104,19 @@ class LiveOptions:
             raise CalibrationError(f"model must be one of {(*MODELS, 'auto')}, got {self.model!r}")
         if not (isinstance(self.sigma, (int, float)) and self.sigma >= 0):
             raise CalibrationError(f"sigma must be >= 0, got {self.sigma!r}")
-        for name, lo in (("rounds", 0), ("window", 1), ("mag_buffer", 50)):
+        for name, lo in (("rounds", 0), ("mag_buffer", 50)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise CalibrationError(f"{name} must be a whole number >= {lo}, got {v!r}")
         parse_radius(self.accel_radius, "accel")
         if self.mag_radius is not None:
             parse_radius(self.mag_radius, "mag")
-        for name in ("units_per_g", "gyro_counts_per_dps"):
+        if self.detection is not None and not isinstance(self.detection, PoseSettings):
+            raise CalibrationError(f"detection must be a PoseSettings, got {self.detection!r}")
+        for name in ("gyro_counts_per_dps",):
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise CalibrationError(f"{name} must be > 0, got {v!r}")
-        if not (isinstance(self.threshold_g, (int, float)) and 0 < self.threshold_g < 2):
-            raise CalibrationError(f"threshold_g must lie between 0 and 2 g, got "
-                                   f"{self.threshold_g!r}")
         if not (isinstance(self.refresh_hz, (int, float)) and 0.2 <= self.refresh_hz <= 50):
             raise CalibrationError(f"refresh_hz must lie in 0.2..50, got {self.refresh_hz!r}")
         if not (isinstance(self.send_timeout_s, (int, float)) and self.send_timeout_s > 0):
@@ -211,10 +209,10 @@ class LiveState:
     >>> from triaxcal.io.serial import Record
     >>> st = LiveState(os.path.join(tempfile.mkdtemp(), "s.csv"), ("ax", "ay", "az"),
     ...                protocol="framed", port="sim")
-    >>> st.on_records([Record(0.0, (0, 0, 16384))] * 200)
+    >>> st.on_records([Record(0.0, (0, 0, 16384))] * 200)   # 2 s flat and still at 100 Hz
     >>> doc = st.refresh()
-    >>> doc["samples"], doc["sensors"]["accel"]["poses"]
-    (200, 0)
+    >>> doc["samples"], doc["sensors"]["accel"]["poses"], doc["next"]
+    (200, 1, 'Accelerometer: hold it still... registering this pose.')
     """
 
     def __init__(
@@ -236,7 +234,11 @@ class LiveState:
         self.protocol = protocol
         self.port = port
         raw = protocol == "raw"
-        self.units_per_g = float(opts.units_per_g or (8192.0 if raw else 16384.0))
+        from ..cli._poses import default_settings
+
+        self.detection = opts.detection if opts.detection is not None else default_settings()
+        #: nominal accelerometer counts per g (for display until the data decide it)
+        self.nominal_counts_per_g = 8192.0 if raw else 16384.0
         self.gyro_cpd = float(opts.gyro_counts_per_dps or (16.0 if raw else 131.0))
         names = self.columns
         self.cols: dict[str, list[int]] = {}
@@ -282,11 +284,11 @@ class LiveState:
 
     # ------------------------------------------------------------------ feeding (capture)
     def _reset_data(self) -> None:
-        opts = self.options
         self.reset_row = self.rows
-        self._detector = PoseDetector(window=opts.window, units_per_g=self.units_per_g,
-                                      threshold=float(opts.threshold_g) * self.units_per_g,
-                                      columns=tuple(self.cols.get("accel", (0, 1, 2))))
+        # the capture's own detector: the same poses as the capture and `fit --poses`
+        named = all(c in self.columns for c in ("ax", "ay", "az"))
+        self._detector = _LivePoses(self.detection, self.columns, None if named else (0, 1, 2))
+        self._pose_sig: tuple[int, int] = (0, 0)
         self._poses: list[np.ndarray] = []  # pose means, all channels
         self._accel_version += 1
         self._magbuf.clear()
@@ -354,10 +356,15 @@ class LiveState:
                 self._rate.popleft()
             self._latest = vals[-1].copy()
             if "accel" in self.cols:
-                new = self._detector.update(vals)
-                if new:
-                    self._poses.extend(np.asarray(p.mean, dtype=np.float64) for p in new)
-                    self._accel_version += 1
+                self._detector.update(records)
+                det = self._detector.det
+                if det is not None:
+                    ps = det.poses
+                    sig = (len(ps), ps[-1].n if ps else 0)  # a held pose grows until it moves
+                    if sig != self._pose_sig:
+                        self._pose_sig = sig
+                        self._poses = [np.asarray(p.mean, dtype=np.float64) for p in ps]
+                        self._accel_version += 1
             if "mag" in self.cols:
                 self._magbuf.add(vals[:, self.cols["mag"]])
             t = records[-1].t
@@ -365,6 +372,15 @@ class LiveState:
                 self._trail.append((t, vals[-1].copy()))
                 self._trail_t = t
                 self._trail_version += 1
+
+    def finish_poses(self) -> None:
+        """The end of the stream: decide on the pose in progress, as the capture does."""
+        with self._lock:
+            self._detector.finish()
+            det = self._detector.det
+            if det is not None:
+                self._poses = [np.asarray(p.mean, dtype=np.float64) for p in det.poses]
+                self._accel_version += 1
 
     # ----------------------------------------------------------------------- fitting
     def _fit_live(self, sensor: str, pts: np.ndarray) -> _Fit:
@@ -474,7 +490,9 @@ class LiveState:
             latest = None if self._latest is None else self._latest.copy()
             trail = list(self._trail)
             trail_version = self._trail_version
-            still = self._detector.still
+            det = self._detector.det
+            still = bool(det.still) if det is not None else False
+            how = self._detector.how
             mag_pts = self._magbuf.points
             mag_version = self._magbuf.version
             accel_version = self._accel_version
@@ -585,9 +603,11 @@ class LiveState:
                             self._reader, "polled", False) and self.status != "finished"},
             "options": {"model": self.options.model, "sigma": self.options.sigma,
                         "rounds": self.options.rounds, "accel_radius": self.options.accel_radius,
-                        "mag_radius": self.options.mag_radius, "window": self.options.window,
-                        "threshold_g": self.options.threshold_g,
-                        "units_per_g": self.units_per_g, "mag_buffer": self.options.mag_buffer},
+                        "mag_radius": self.options.mag_radius,
+                        "detection": self.detection.to_dict(),
+                        "units_per_g": how.counts_per_g if how is not None
+                        else self.nominal_counts_per_g,
+                        "mag_buffer": self.options.mag_buffer},
         }
         return doc, points
 
@@ -770,6 +790,7 @@ class LiveState:
         accelerometer with ``--poses``, the magnetometer on every row) and publish that."""
         from .actions import fit_session
 
+        self.finish_poses()
         with self._lock:
             self.status = "finished"
             self.stopped_by = getattr(result, "stopped_by", None)

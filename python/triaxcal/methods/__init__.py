@@ -7,8 +7,14 @@
 * :mod:`~triaxcal.methods.temperature` -- offsets and gains as polynomials in temperature.
 * :mod:`~triaxcal.methods.static` -- methods that need no fit: tilt rig, six-position
   min/max, Ferraris closed form.
+* :mod:`~triaxcal.methods.allan` -- overlapping Allan deviation, streamed through the Rust core.
+* :mod:`~triaxcal.methods.bootstrap` -- bootstrap confidence intervals of fit coefficients.
+* :mod:`~triaxcal.methods.noise` -- noise figures (random walks, bias instability) and Kalibr's
+  noise keys.
 """
 
+from .allan import AllanAccumulator, AllanDeviation, allan
+from .bootstrap import BootstrapIntervals, bootstrap
 from .gyro import (
     GyroBias,
     GyroGains,
@@ -20,6 +26,7 @@ from .gyro import (
     gyro_gains,
 )
 from .imu import ImuCalibration, SweepStep, TriadCalibration, calibrate_imu
+from .noise import AxisNoise, NoiseFigures, kalibr_noise, noise_figures, plot_allan
 from .static import (
     FerrarisCalibration,
     SixPosition,
@@ -31,6 +38,16 @@ from .static import (
 from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
 
 __all__ = [
+    "AllanAccumulator",
+    "AllanDeviation",
+    "AxisNoise",
+    "BootstrapIntervals",
+    "NoiseFigures",
+    "allan",
+    "bootstrap",
+    "kalibr_noise",
+    "noise_figures",
+    "plot_allan",
     "FerrarisCalibration",
     "GyroBias",
     "GyroGains",

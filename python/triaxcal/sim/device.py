@@ -109,7 +109,7 @@ class SimDevice:
         Mode at power-on (``"P"``, polled, like the firmware).
     loop : bool
         Start the script again at its end; otherwise hold the last pose and set
-        :attr:`finished` (streaming stops).
+        :attr:`finished` (streaming stops) once every frame of the script is in the pty.
     faults : Faults, optional
         Bytes to damage, for tests.
     temp_c : float or (start, end)
@@ -336,18 +336,18 @@ class SimDevice:
                 cur = self._sample()
                 if not self.loop and cur >= n:
                     cur = n - 1
-                    if self._next >= n:
-                        self.finished.set()
                 silent = time.monotonic() < self._silent_until
                 if self.protocol is not None and not silent:
                     while self._next <= cur and self._pending_bytes < 8192:
                         self._emit(self._next, self.protocol, polled=False)
                         self._next += 1
-                    if not self.loop and self._next >= n:
-                        self.finished.set()
                 if silent or self.protocol is None:
                     self._next = max(self._next, cur + 1)  # no burst of old samples later
                 self._flush()
+                if not self.loop and self._next >= n and not self._pending:
+                    # the script is over and every byte of it is in the pty: whatever the
+                    # host has not read yet is in its input buffer, not still to come
+                    self.finished.set()
             except OSError:
                 # unplugged under our feet (stop() or unplug() from another thread)
                 time.sleep(0.002)
