@@ -63,6 +63,15 @@ _MC_HELP = {"gaps": "empty regions of the sphere (MotionCal's 100)",
             "wobble": "how far the cloud sits off centre",
             "fit_error": "RMS of |calibrated| - radius, in % of the radius"}
 
+def _rects() -> list[list[float]]:
+    from ..coverage import sphere_cells
+
+    return [[round(v, 6) for v in r] for r in sphere_cells().rectangles()]
+
+
+#: The shared coverage cells (``triaxcal.coverage``) as (lon_lo, lon_hi deg, z_lo, z_hi).
+_RECTS = _rects()
+
 _TRAIL_HZ = 25.0
 _TRAIL_S = 10.0
 
@@ -482,7 +491,7 @@ class LiveState:
         return d
 
     def _build(self, poses: np.ndarray) -> tuple[dict[str, Any], dict[str, Any]]:
-        from ..io.capture import suggest_turn
+        from ..coverage import suggest_turn
 
         now = time.monotonic()
         with self._lock:
@@ -605,8 +614,9 @@ class LiveState:
                         "rounds": self.options.rounds, "accel_radius": self.options.accel_radius,
                         "mag_radius": self.options.mag_radius,
                         "detection": self.detection.to_dict(),
-                        "units_per_g": how.counts_per_g if how is not None
-                        else self.nominal_counts_per_g,
+                        "units_per_g": self.nominal_counts_per_g,
+                        "detection_counts_per_g": how.counts_per_g if how is not None
+                        else None,
                         "mag_buffer": self.options.mag_buffer},
         }
         return doc, points
@@ -617,7 +627,8 @@ class LiveState:
         """Coverage, the biggest empty cap and the quality checks of one sensor; recomputed
         when its points or fit changed, at most 4 times a second (the cap search is the
         costly part)."""
-        from ..report import coverage, direction_words
+        from ..coverage import coverage, sphere_cells
+        from ..report import direction_words
 
         now = time.monotonic()
         cached = self._derived_cache.get(sensor)
@@ -627,16 +638,17 @@ class LiveState:
         if len(raw):
             dirs = fit.apply(raw) if fit is not None else raw - (
                 np.median(raw, axis=0) if sensor == "mag" and len(raw) > 20 else 0.0)
-            counts, pct = coverage(dirs)
+            cov_ = coverage(dirs)
+            counts, pct = cov_.counts, cov_.percent
             found = biggest_empty_cap(dirs)
         else:
-            counts, pct, found = np.zeros((10, 10), dtype=np.int64), 0.0, None
+            counts, pct, found = np.zeros(sphere_cells().n, dtype=np.int64), 0.0, None
         cap: dict[str, Any] | None = None
         if found is not None:
             c, ang = found
             cap = {"center": c, "deg": ang, "words": direction_words(c)}
-        cov = {"pct": pct, "cells": counts, "cells_hit": int(np.count_nonzero(counts)),
-               "cells_total": int(counts.size), "empty_cap": cap}
+        cov = {"pct": pct, "counts": counts, "cells_hit": int(np.count_nonzero(counts)),
+               "cells_total": int(counts.size), "rects": _RECTS, "empty_cap": cap}
         q_gaps = None
         if sensor == "accel":
             rms_pct = 100.0 * fit.rms / fit.radius if fit else math.inf

@@ -236,7 +236,7 @@ function card(sensor, st) {
   const cap = cov.empty_cap;
   setHTML(n.querySelector(".cov-text"),
     `<b>${num(`sensors.${sensor}.coverage.pct`, cov.pct, fmt(cov.pct, 0))} %</b> of the sphere of directions covered<br>
-     (${cov.cells_hit} of ${cov.cells_total} equal-area cells; green = hit)` +
+     (${cov.cells_hit} of ${cov.cells_total} equal-area cells, the measure capture, fit and report use; green = hit)` +
     (cap ? `<br>biggest empty region: <b>${esc(cap.words)}</b>, ${num(`sensors.${sensor}.coverage.empty_cap.deg`, cap.deg, fmt(cap.deg, 0))}\u00b0 across (orange)` : ""));
   // fit
   setHTML(n.querySelector(".fit"), fitTable(sensor, s));
@@ -282,20 +282,23 @@ function fitTable(sensor, s) {
 
 // ------------------------------------------------------------------ small canvases
 function drawCoverage(cv, cov, dir) {
+  // the shared equal-area cells (triaxcal.coverage) in the cylindrical equal-area projection:
+  // longitude across (-180..180 deg, -X at both ends), height z up
   const g = cv.getContext("2d"), W = cv.width, H = cv.height;
-  const nb = cov.cells.length, ns = cov.cells[0].length;
   g.clearRect(0, 0, W, H);
-  const L = 22, B = 16, w = (W - L) / ns, h = (H - B) / nb;
+  const L = 22, B = 16;
+  const X = (deg) => L + (deg + 180) / 360 * (W - L);
+  const Y = (z) => (H - B) * (1 - (z + 1) / 2);
   let max = 1;
-  for (const row of cov.cells) for (const v of row) max = Math.max(max, v);
-  for (let b = 0; b < nb; b++) {
-    for (let s = 0; s < ns; s++) {
-      const v = cov.cells[b][s];
-      const y = H - B - (b + 1) * h;  // band 0 is the bottom (-Z)
-      g.fillStyle = v > 0 ? `rgba(31,138,76,${0.35 + 0.65 * Math.log1p(v) / Math.log1p(max)})` : "#d9dde2";
-      g.fillRect(L + s * w + 0.5, y + 0.5, w - 1, h - 1);
+  for (const v of cov.counts) max = Math.max(max, v);
+  cov.rects.forEach(([lo, hi, zlo, zhi], i) => {
+    const v = cov.counts[i];
+    g.fillStyle = v > 0 ? `rgba(31,138,76,${0.35 + 0.65 * Math.log1p(v) / Math.log1p(max)})` : "#d9dde2";
+    for (const shift of [0, -360]) {  // a cell may run past 180 deg: draw its wrapped part too
+      const a = Math.max(lo + shift, -180), b = Math.min(hi + shift, 180);
+      if (b > a) g.fillRect(X(a) + 0.5, Y(zhi) + 0.5, X(b) - X(a) - 1, Y(zlo) - Y(zhi) - 1);
     }
-  }
+  });
   const px = (lon) => L + (lon + Math.PI) / (2 * Math.PI) * (W - L);
   const py = (z) => (H - B) * (1 - (z + 1) / 2);
   const cap = cov.empty_cap;
