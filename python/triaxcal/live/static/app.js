@@ -5,6 +5,7 @@
 
 const T = (window.triaxcal = {
   messages: 0, applied: 0, painted: 0, draws: { accel: 0, mag: 0 }, drawMs: { accel: 0, mag: 0 },
+  drawAvg: { accel: 0, mag: 0 },
   state: null, points: {}, errors: [],
   seen: [],  // [version, status, accelerometer poses, coverage %] of each state shown
   banners: [],  // [kind, text] of the banners shown, in order
@@ -281,9 +282,19 @@ function fitTable(sensor, s) {
 }
 
 // ------------------------------------------------------------------ small canvases
+/* Redraw a canvas only when what it shows changed (each redraw is raster work for the page). */
+function unchanged(cv, key) {
+  if (cv.__key === key) return true;
+  cv.__key = key;
+  return false;
+}
+
 function drawCoverage(cv, cov, dir) {
   // the shared equal-area cells (triaxcal.coverage) in the cylindrical equal-area projection:
   // longitude across (-180..180 deg, -X at both ends), height z up
+  const dkey = dir ? dir.map((v) => (v / (norm(dir) || 1)).toFixed(2)).join() : "";
+  if (unchanged(cv, cov.counts.join() + "|" + (cov.empty_cap ? cov.empty_cap.deg.toFixed(1) +
+      cov.empty_cap.center.map((v) => v.toFixed(2)).join() : "") + "|" + dkey)) return;
   const g = cv.getContext("2d"), W = cv.width, H = cv.height;
   g.clearRect(0, 0, W, H);
   const L = 22, B = 16;
@@ -339,6 +350,7 @@ function drawCoverage(cv, cov, dir) {
 }
 
 function drawPrecision(cv, hist) {
+  if (unchanged(cv, hist.length + ":" + (hist.length ? hist[hist.length - 1].join() : ""))) return;
   const g = cv.getContext("2d"), W = cv.width, H = cv.height;
   g.clearRect(0, 0, W, H);
   const vals = hist.filter((p) => p[1] !== null && p[1] > 0);
@@ -475,6 +487,11 @@ function draw3d(sensor) {
   Plotly.react(c.plot, traces, layout, { displayModeBar: false, responsive: true });
   T.drawMs[sensor] = performance.now() - t0;
   T.draws[sensor] += 1;
+  // typical draw time, leaving out the first draw (it sets WebGL up and is much slower)
+  if (T.draws[sensor] > 1) {
+    const prev = T.drawAvg[sensor];
+    T.drawAvg[sensor] = prev ? 0.7 * prev + 0.3 * T.drawMs[sensor] : T.drawMs[sensor];
+  }
 }
 
 let rafPending = false;
@@ -488,7 +505,7 @@ function schedule() {
     for (const [sensor, c] of Object.entries(cards)) {
       // redraw a view at most every 250 ms, and keep the 3D views to about a quarter of the
       // page's time where drawing is slow (software WebGL), so the numbers stay live
-      const gap = Math.max(250, 8 * (T.drawMs[sensor] || 0));
+      const gap = Math.max(250, 8 * (T.drawAvg[sensor] || 0));
       if (c.dirty && now - c.lastDraw >= gap) {
         c.dirty = false;
         c.lastDraw = now;
@@ -517,7 +534,9 @@ function gyro(st) {
   setHTML(el.querySelector(".gbias"), b ? `bias estimate from ${g.poses} still poses: ` + AX.map((a, i) =>
     `${a} ${num(`sensors.gyro.bias_from_poses.${i}`, b[i], fmt(b[i], 3))}`).join(", ") + " deg/s (subtract it from the rates)" : "the bias appears after the first still pose");
   const tr = T.points.trail;
-  const cv = el.querySelector("canvas"), c = cv.getContext("2d"), W = cv.width, H = cv.height;
+  const cv = el.querySelector("canvas");
+  if (unchanged(cv, tr ? tr.version : -1)) return;
+  const c = cv.getContext("2d"), W = cv.width, H = cv.height;
   c.clearRect(0, 0, W, H);
   if (!tr || !tr.gyro || tr.gyro.length < 2) return;
   let m = 1;
