@@ -54,8 +54,17 @@ def test_demo_calibration_exports_in_every_format(demo_dir, tmp_path, capsys):
     for fmt in EXPORT_FORMATS:
         out = tmp_path / f"out.{fmt}"
         extra = ["--rate", "100"] if fmt == "kalibr" else []
+        if fmt == "motioncal":
+            # the packet has no accelerometer gains: refused unless the loss is accepted
+            assert main(["export", str(cal_path), "--format", fmt, "-o", str(out)]) == 1
+            err = capsys.readouterr().err
+            assert "accelerometer: gains" in err and "--offsets-only" in err
+            assert not out.exists()
+            extra = ["--offsets-only"]
         rc = main(["export", str(cal_path), "--format", fmt, "-o", str(out), *extra])
-        err = capsys.readouterr().err
+        out_text, err = capsys.readouterr()
+        if fmt == "motioncal":
+            assert "not in the packet: accelerometer: gains" in out_text
         if fmt in ("c", "c-fixed", "json", "motioncal"):
             assert rc == 0, err
         if rc == 0:

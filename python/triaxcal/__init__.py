@@ -4,9 +4,9 @@ Fits run in Rust (``triaxcal._core``) with the GIL released; capture, export and
 Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
 """
 
-from . import sim
+from . import rotations, sim
 from ._core import __version__
-from .calibration import Calibration, SensorCalibration, TemperatureTerms
+from .calibration import Alignment, Calibration, SensorCalibration, TemperatureTerms
 from .compare import CalibrationDiff, compare
 from .detect import (
     Pose,
@@ -32,6 +32,7 @@ from .export import (
     px4_params_file,
     write_outputs,
 )
+from .field import ExpectedField, expected_field
 from .fit import (
     MODELS,
     BatchFit,
@@ -49,6 +50,13 @@ from .fit import (
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
 from .io.tables import Table, read_table
+from .methods.alignment import (
+    AlignmentWarning,
+    MagAccelAlignment,
+    align_mag_accel,
+    axis_heading,
+    heading_errors,
+)
 from .methods.allan import AllanAccumulator, AllanDeviation, allan
 from .methods.bootstrap import BootstrapIntervals, bootstrap
 from .methods.gyro import (
@@ -77,6 +85,7 @@ from .methods.static import (
     tilt_rig,
 )
 from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .methods.yaw import YawCalibration, fit_yaw
 from .parts import (
     fold_asa,
     part_from_center,
@@ -109,6 +118,17 @@ __all__ = [
     "part_from_temperature",
     "part_from_tilt_rig",
     "js_module",
+    "YawCalibration",
+    "fit_yaw",
+    "Alignment",
+    "AlignmentWarning",
+    "MagAccelAlignment",
+    "align_mag_accel",
+    "axis_heading",
+    "heading_errors",
+    "rotations",
+    "ExpectedField",
+    "expected_field",
     "LogRecording",
     "Stream",
     "adafruit_calib_json",

@@ -479,6 +479,9 @@ PART_FIELDS: dict[str, Field] = {
     "input_sha256": Field(optional(sha256_hex)),
     "source": Field(optional(SOURCE_TEXT)),
     "stats": Field(optional(stats_object)),
+    # checked in full by triaxcal.field.ExpectedField and triaxcal.rotations.Alignment
+    "expected_field": Field(optional(json_object)),
+    "alignment": Field(optional(json_object)),
 }
 
 SENSOR_ID_TEXT = text(256)

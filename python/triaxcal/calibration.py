@@ -18,6 +18,11 @@ shortest text that reads back to the same double), so ``load(save(cal)) == cal``
 A part that replaced an earlier calibration of the same sensor keeps a ``previous`` list of
 summaries (newest first, at most :data:`MAX_PREVIOUS`): when it was replaced, the coefficients,
 units, standard errors and provenance -- enough for ``triaxcal diff`` to say what changed.
+
+A magnetometer part may also hold the field the World Magnetic Model expects where it was
+calibrated (``expected_field``, :class:`triaxcal.field.ExpectedField`) and its alignment with
+the accelerometer (``alignment``, :class:`Alignment`: ``v_accel = rotation @ v_mag`` for
+calibrated readings; :meth:`SensorCalibration.apply_aligned`).
 """
 
 from __future__ import annotations
@@ -38,12 +43,15 @@ from . import _schema
 from ._core import __version__
 from ._validate import as_points
 from .errors import CalibrationError
+from .field import ExpectedField
 from .io.files import read_bounded, write_file
+from .rotations import Alignment
 
 __all__ = [
     "KNOWN_MODELS",
     "SCHEMA",
     "SENSORS",
+    "Alignment",
     "Calibration",
     "SensorCalibration",
     "TemperatureTerms",
@@ -161,7 +169,6 @@ def _horner(poly: np.ndarray, dt: np.ndarray) -> np.ndarray:
         acc = acc * dt + row
     return acc
 
-
 @dataclass(frozen=True, eq=False)
 class SensorCalibration:
     """Calibration of one three-axis sensor: ``calibrated = (raw - offset) @ matrix.T``.
@@ -192,6 +199,11 @@ class SensorCalibration:
     previous : tuple of dict
         Summaries of the calibrations of this sensor that this one replaced, newest first (see
         :meth:`with_previous`).
+    expected_field : ExpectedField, optional
+        The field the World Magnetic Model expects where the part was calibrated (magnetometer).
+    alignment : Alignment, optional
+        Rotation of this part's calibrated frame into another part's (magnetometer into
+        accelerometer); :meth:`apply_aligned` applies it.
     """
 
     offset: np.ndarray
@@ -205,6 +217,8 @@ class SensorCalibration:
     input_sha256: str | None = None
     source: str | None = None
     previous: tuple[dict[str, Any], ...] = ()
+    expected_field: ExpectedField | None = None
+    alignment: Alignment | None = None
 
     def __post_init__(self) -> None:
         f = _schema.PART_FIELDS
@@ -227,6 +241,12 @@ class SensorCalibration:
                                    f"{MAX_PREVIOUS} are kept")
         object.__setattr__(self, "previous", tuple(
             _summary(p, f"previous[{i}]") for i, p in enumerate(prev)))
+        if self.expected_field is not None and not isinstance(self.expected_field,
+                                                              ExpectedField):
+            object.__setattr__(self, "expected_field",
+                               ExpectedField.from_dict(self.expected_field))
+        if self.alignment is not None and not isinstance(self.alignment, Alignment):
+            object.__setattr__(self, "alignment", Alignment.from_dict(self.alignment))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod
@@ -414,6 +434,24 @@ class SensorCalibration:
         out = d @ self.matrix.T
         return out[0] if single else out
 
+    def apply_aligned(self, raw: Any, temperature: Any = None) -> np.ndarray:
+        """Calibrate, then turn into the aligned frame: ``apply(raw) @ alignment.rotation.T``.
+
+        Raises :class:`CalibrationError` when the part has no alignment.
+        """
+        if self.alignment is None:
+            raise CalibrationError(
+                "this part has no alignment: fit one with tc.align_mag_accel (or `triaxcal fit "
+                "--sensor mag --align`), or use apply()")
+        out = self.apply(raw, temperature=temperature)
+        return out @ self.alignment.rotation.T
+
+    def replace(self, **changes: Any) -> SensorCalibration:
+        """A copy with some fields changed (e.g. ``part.replace(alignment=None)``)."""
+        import dataclasses
+
+        return dataclasses.replace(self, **changes)
+
     @property
     def diag(self) -> np.ndarray:
         """Diagonal of ``matrix`` (per-axis gain), calibrated units per raw unit."""
@@ -506,6 +544,10 @@ class SensorCalibration:
         d["stats"] = self.stats
         if self.previous:
             d["previous"] = [dict(p) for p in self.previous]
+        if self.expected_field is not None:
+            d["expected_field"] = self.expected_field.to_dict()
+        if self.alignment is not None:
+            d["alignment"] = self.alignment.to_dict()
         return d
 
     @classmethod
@@ -534,6 +576,8 @@ class SensorCalibration:
                 input_sha256=v.get("input_sha256"),
                 source=v.get("source"),
                 previous=v.get("previous") or (),
+                expected_field=v.get("expected_field"),
+                alignment=v.get("alignment"),
             )
         except CalibrationError as exc:
             raise CalibrationError(f"{what}: {exc}") from None
@@ -610,6 +654,11 @@ class Calibration:
                 )
         if not any(getattr(self, s) is not None for s in SENSORS):
             raise CalibrationError("a Calibration needs at least one of accel, gyro, mag")
+        for name in SENSORS:
+            part = getattr(self, name)
+            if part is not None and part.alignment is not None and part.alignment.to == name:
+                raise CalibrationError(f"{name}.alignment.to is {name}: a part cannot be aligned "
+                                       "to itself")
         for name in ("sensor_id", "created_utc", "library_version"):
             _schema.TOP_FIELDS[name].check(getattr(self, name), name)
         if not isinstance(self.extra, Mapping):

@@ -12,7 +12,12 @@ For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T
 * the outliers rejected before the fit, by index;
 * warnings in plain language, each with what to do; the largest empty regions of the sphere
   are found as the directions farthest from every reading and named in words ("the top of the
-  sphere (+Z) is empty").
+  sphere (+Z) is empty");
+* for a magnetometer: the field the World Magnetic Model expects where it was calibrated
+  (total, horizontal, inclination, declination) beside the strength the readings show, its
+  alignment with the accelerometer (rotation, mounting, dip angle and its spread before and
+  after, the heading error on held-out poses), and for a yaw-only calibration what it
+  determines and what not (:func:`context_lines`).
 
 :func:`plot_report` draws raw and calibrated points in the XY, XZ and YZ projections with the
 fitted ellipse / circle, a histogram of residuals, the coverage map and the norms over time.
@@ -40,6 +45,7 @@ from .units import per_unit
 
 __all__ = [
     "QualityReport",
+    "context_lines",
     "coverage",
     "direction_words",
     "empty_regions",
@@ -243,6 +249,7 @@ class QualityReport:
         ]
         if self.model_reason:
             lines.append(f"  model choice    {self.model_reason}")
+        lines += self.extra.get("context", [])
         ci = (self.intervals or {}).get("coefficients") or {}
         if self.stderr:
             lines.append("  standard errors" + (
@@ -357,6 +364,8 @@ def quality_report(
         if not isinstance(intervals, dict) or not isinstance(intervals.get("coefficients"), dict):
             raise CalibrationError("intervals must come from triaxcal.bootstrap")
         warnings += [w for w in intervals.get("warnings", []) if w not in warnings]
+    if part.model == "yaw":  # turns about the vertical cover a band of the sphere, on purpose
+        warnings = [w for w in warnings if "sphere" not in w]
     return QualityReport(
         sensor=sensor,
         unit=part.unit,
@@ -380,7 +389,55 @@ def quality_report(
         warnings=warnings,
         model_reason=model_reason or part.stats.get("model_reason"),
         intervals=intervals,
+        extra={"context": context_lines(part)},
     )
+
+
+def context_lines(part: SensorCalibration) -> list[str]:
+    """Report lines on a magnetometer's surroundings: the expected field, the alignment with
+    the accelerometer and the heading check, a yaw-only calibration's limits (empty for
+    other parts)."""
+    lines: list[str] = []
+    f = part.expected_field
+    if f is not None:
+        lines.append(f"  expected field  {f.model} at {f.lat_deg:.4f}, {f.lon_deg:.4f}, "
+                     f"{f.alt_m:.0f} m on {f.date}:")
+        lines.append(f"                  total {f.total_ut:.2f} uT, horizontal "
+                     f"{f.horizontal_ut:.2f} uT, inclination {f.inclination_deg:.2f} deg, "
+                     f"declination {f.declination_deg:.2f} deg")
+        shown = part.stats.get("field_strength_ut")
+        if shown is not None:
+            what = "horizontal" if part.model == "yaw" else "total"
+            ref = f.horizontal_ut if part.model == "yaw" else f.total_ut
+            lines.append(f"                  the readings show {shown:.4g} uT {what} "
+                         f"({100 * (shown / ref - 1):+.1f} %)")
+        elif part.raw_unit == "counts":
+            lines.append("                  (raw counts: their strength is not compared; "
+                         "--raw-unit names a physical unit)")
+    al = part.alignment
+    if al is not None:
+        st = al.stats
+        from .rotations import rotation_angle_deg
+
+        mnt = (f"{al.mounting} + {al.mounting_residual_deg:.2f} deg" if al.mounting
+               else "not a right-angle mounting")
+        ang = rotation_angle_deg(al.rotation)
+        lines.append(f"  alignment       into the {al.to} frame: {ang:.2f} deg ({mnt})")
+        if "dip_deg" in st:
+            lines.append(f"                  dip {st['dip_deg']:.2f} deg; spread over "
+                         f"{st.get('n_fit', '?')} poses {st['dip_std_before_deg']:.3f} deg "
+                         f"before, {st['dip_std_after_deg']:.3f} deg after")
+        if st.get("heading_rms_est_deg") is not None:
+            lines.append(f"  heading check   {st['n_heldout']} held-out poses: dip spread "
+                         f"{st['dip_std_heldout_before_deg']:.3f} -> "
+                         f"{st['dip_std_heldout_after_deg']:.3f} deg; heading error about "
+                         f"{st['heading_rms_est_deg']:.2f} deg rms (from the dip residuals)")
+    y = part.stats.get("yaw")
+    if isinstance(y, dict) and "determined" in y:
+        from .methods.yaw import yaw_text
+
+        lines += ["  " + ln for ln in yaw_text(y, part.unit).splitlines()]
+    return lines
 
 
 def _warnings(part: SensorCalibration, fit: Any, sensor: str | None, n: int, rej: list[int],

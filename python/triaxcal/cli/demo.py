@@ -103,7 +103,9 @@ def _print_result(args: argparse.Namespace, result: dict[str, Any]) -> None:
     print(result["table"])
     print(f"session: {result['session']}\nresults: {result['results']}")
     for kind, path in result["outputs"].items():
-        print(f"{kind}: {path}")
+        note = (" (offsets and soft iron only: the accelerometer's gains are in the C headers)"
+                if kind == "motioncal" else "")
+        print(f"{kind}: {path}{note}")
     if not args.no_plot and not any(k.startswith("figure_") for k in result["outputs"]):
         print("report figures skipped: matplotlib is not installed "
               "(pip install 'triaxcal[plot]')")

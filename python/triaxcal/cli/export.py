@@ -18,7 +18,7 @@ from typing import Any
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
-from ..export import DEVICE_COUNTS_PER_UNIT, EXPORT_FORMATS, export
+from ..export import DEVICE_COUNTS_PER_UNIT, EXPORT_FORMATS, export, motioncal_losses
 from ..io.files import check_output, read_bounded
 
 
@@ -77,6 +77,13 @@ def register(subparsers: Any) -> None:
                         "gyroscope_random_walk")
     g.add_argument("--kalibr-model", default="scale-misalignment",
                    choices=("scale-misalignment", "calibrated"), help="kalibr: IMU model")
+    p.add_argument("--offsets-only", action="store_true",
+                   help="motioncal: accept that the packet carries the accelerometer's and "
+                        "gyroscope's offsets but not their gains or any temperature terms "
+                        "(without it such a calibration is refused, naming what would be lost)")
+    p.add_argument("--no-alignment", action="store_true",
+                   help="leave the magnetometer-to-accelerometer alignment out on purpose (for "
+                        "a format that cannot hold it: motioncal, or a non-right-angle one)")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
                    help="file to write (replaced whole; its folder must exist)")
     p.set_defaults(func=run)
@@ -151,10 +158,18 @@ def _param_options(args: argparse.Namespace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     out = check_output(args.output, "export")
     cal = Calibration.load(args.calibration)
+    if getattr(args, "no_alignment", False):
+        cal = cal.replace(**{s: cal.part(s).replace(alignment=None) for s in cal.sensors})
     if out.resolve() == Path(args.calibration).resolve():
         raise CalibrationError("-o must differ from the calibration file")
+    if args.offsets_only and args.fmt != "motioncal":
+        raise CalibrationError(f"--offsets-only applies to --format motioncal, not {args.fmt}")
     export(cal, args.fmt, out, prefix=args.prefix,
-           counts_per_unit=dict(args.counts_per_unit) or None, **_param_options(args))
+           counts_per_unit=dict(args.counts_per_unit) or None, offsets_only=args.offsets_only,
+           **_param_options(args))
+    if args.fmt == "motioncal":
+        for lost in motioncal_losses(cal, counts_per_unit=dict(args.counts_per_unit) or None):
+            print(f"  not in the packet: {lost}")
     size = out.stat().st_size if out.is_file() else None
     print(f"wrote {out} ({args.fmt}" + (f", {size} bytes" if size is not None else "")
           + f"; sensors: {', '.join(cal.sensors)})")

@@ -30,13 +30,15 @@ import numpy as np
 from ..calibration import SENSORS, Calibration, SensorCalibration
 from ..coverage import coverage, coverage_warning
 from ..errors import CalibrationError
+from ..field import ExpectedField
 from ..fit import MODELS
 from ..io.akm import apply_asa, asa_factors
 from ..io.files import check_output
 from ..io.tables import SENSOR_COLUMNS, Table, pick_columns, read_table
 from ..parts import fold_asa
 from ..poses import PoseSettings, sensor_columns, session_poses
-from ..units import implausible_radius
+from ..units import implausible_radius, unit_factor
+from ._field import add_field_options, alignment_for, expected_from_args, field_stats, yaw_part
 from ._poses import add_pose_options
 from ._source import Source, add_source_options, autopilot_lines, autopilot_stats, load_source
 
@@ -183,6 +185,7 @@ class FitOutcome:
     source: Source | None = None
     #: Things to tell the user about the input (skipped lines, an implausible radius).
     notes: list[str] = field(default_factory=list)
+    expected: ExpectedField | None = None
 
 
 def pose_points(
@@ -211,12 +214,28 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
 
     sensor = args.sensor or "accel"
     notes: list[str] = []
+    expected = expected_from_args(args, sensor)
+    if (getattr(args, "yaw_only", False) or getattr(args, "align", False)) and sensor != "mag":
+        raise CalibrationError("--yaw-only and --align apply to --sensor mag")
     src = load_source(args.data, sensor, args)
     table, pts = src.table, src.points
     if table is not None:
         notes += [f"note: {n}" for n in table.notes]
     raw_unit = args.raw_unit or src.raw_unit or "counts"
-    if args.radius is not None:
+    if getattr(args, "yaw_only", False):
+        if args.radius is not None and args.radius.strip().lower() != "wmm":
+            raise CalibrationError("--yaw-only takes the field from --location (the World "
+                                   "Magnetic Model); drop --radius")
+        part = yaw_part(args, src, expected, raw_unit)
+        if expected is not None:
+            part, _ = field_stats(part, expected)
+        return FitOutcome(part=part, points=pts, sensor=sensor,
+                          rejected=np.zeros(0, dtype=np.int64), reason=None, table=table,
+                          source=src, expected=expected)
+    if expected is not None and args.radius is not None and args.radius.strip().lower() == "wmm":
+        unit = args.unit or "uT"
+        radius = expected.total_ut * unit_factor("uT", unit)
+    elif args.radius is not None:
         radius, unit = parse_radius(args.radius, sensor)
         warn = implausible_radius(sensor, radius, unit)
         if warn:
@@ -274,14 +293,17 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         stats["intervals"] = ci.as_dict()
         stats["warnings"] = list(stats.get("warnings", [])) + ci.warnings()
     part = SensorCalibration(**{**_fields(part), "stats": stats})
+    if expected is not None:
+        part, _ = field_stats(part, expected)
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
-                      reason=rob.model_reason, table=table, source=src, notes=notes)
+                      reason=rob.model_reason, table=table, source=src, notes=notes,
+                      expected=expected)
 
 
 def _fields(part: SensorCalibration) -> dict[str, Any]:
     return {k: getattr(part, k) for k in ("offset", "matrix", "raw_unit", "unit", "radius",
                                           "model", "temperature", "stats", "input_sha256",
-                                          "source", "previous")}
+                                          "source", "previous", "expected_field", "alignment")}
 
 
 def undetermined(part: SensorCalibration, points: Any) -> list[str]:
@@ -338,6 +360,7 @@ def register(subparsers: Any) -> None:
                    help="write the calibration even when the fit did not converge or its "
                         "readings cover too little of the sphere (the warning is kept in the "
                         "file)")
+    add_field_options(p)
     p.set_defaults(func=run)
 
 
@@ -347,7 +370,8 @@ def run(args: argparse.Namespace) -> int:
     for n in out.notes:
         if n.startswith("note: "):  # warnings are printed with the fit's below
             print(f"  {n}", file=sys.stderr)
-    why = undetermined(out.part, out.points[_inliers(out)])
+    # a yaw-only part is meant to cover a band round the vertical; it states its own limits
+    why = [] if out.part.model == "yaw" else undetermined(out.part, out.points[_inliers(out)])
     if why and not args.force:
         print(
             f"triaxcal fit: not written: this {out.sensor} fit is not a calibration: "
@@ -362,6 +386,10 @@ def run(args: argparse.Namespace) -> int:
                              *(f"written with --force although {w}" for w in why)]
         stats["forced"] = True
         out.part = SensorCalibration(**{**_fields(out.part), "stats": stats})
+    align_text = None
+    if getattr(args, "align", False):
+        al, align_text = alignment_for(args, out.source, out.part, out.expected)
+        out.part = out.part.replace(alignment=al)
     cal = None
     if path.is_file() and path.stat().st_size > 0 and not args.new:
         try:
@@ -402,6 +430,16 @@ def run(args: argparse.Namespace) -> int:
     )
     if out.reason:
         print(f"  model: {out.reason}")
+    if out.expected is not None:
+        print(f"  expected field: {out.expected.text()}")
+        if s.get("field_strength_ut") is not None:
+            print(f"  the readings show {s['field_strength_ut']:.4g} uT")
+    if "yaw" in s:
+        from ..methods.yaw import yaw_text
+
+        print("  " + yaw_text(s["yaw"], out.part.unit).replace("\n", "\n  "))
+    if align_text:
+        print("  " + align_text.replace("\n", "\n  "))
     for w in s.get("warnings", []):
         print(f"  warning: {w}")
     if out.source is not None and out.source.recording is not None:

@@ -22,7 +22,7 @@ from ..fit import MODELS
 from ..io.files import check_output, write_file
 from ..io.logs import is_log
 from ..io.tables import pick_columns, read_table
-from ..report import QualityReport, plot_report, quality_report
+from ..report import QualityReport, context_lines, plot_report, quality_report
 from ._calfile import file_sha256
 from ._method_parts import summary_only, summary_text, tilt_points
 from ._poses import apply_settings, stored_settings
@@ -87,6 +87,7 @@ def _stored_text(sensor: str, part: SensorCalibration) -> str:
         lines.append(f"  coverage        {s['coverage_pct']:.0f} % of the sphere")
     if s.get("rejected") is not None:
         lines.append(f"  outliers        {len(s['rejected'])} rejected")
+    lines += context_lines(part)
     for w in s.get("warnings", []):
         lines.append(f"    - {w}")
     return "\n".join(lines)

@@ -50,7 +50,7 @@ from .c import c_header
 from .c_fixed import FixedPoint, apply_fixed, c_fixed_header, fixed_point
 from .js import js_module
 from .kalibr import KALIBR_MODELS, KALIBR_NOISE_KEYS, kalibr_imu_yaml, kalibr_intrinsics
-from .motioncal import motioncal_packet
+from .motioncal import motioncal_losses, motioncal_packet
 from .px4 import px4_params, px4_params_file
 
 __all__ = [
@@ -78,6 +78,7 @@ __all__ = [
     "export",
     "fixed_point",
     "js_module",
+    "motioncal_losses",
     "motioncal_packet",
     "parse_motioncal_echo",
     "unit_factor",
@@ -95,6 +96,7 @@ def export(
     *,
     prefix: str = "triaxcal",
     counts_per_unit: Mapping[str, Any] | None = None,
+    offsets_only: bool = False,
     **options: Any,
 ) -> Path:
     """Write ``cal`` in format ``fmt`` (one of :data:`EXPORT_FORMATS`) to ``path``.
@@ -103,6 +105,7 @@ def export(
     ``sensors``, ``compass_scale``, ``offsets_max``), :func:`px4_params_file` (``instance``,
     ``sensors``, ``device_ids``, ``system_id``, ``component_id``), :func:`kalibr_imu_yaml`
     (``topic``, ``rate_hz``, ``noise``, ``model``), :func:`adafruit_calib_json` (``sensors``).
+    ``offsets_only`` is :func:`motioncal_packet`'s (accept the terms the packet cannot hold).
 
     The file is written whole and atomically (:func:`triaxcal.io.files.write_file`); a
     failure (missing folder, full disk) raises :class:`CalibrationError` saying what to do.
@@ -112,6 +115,8 @@ def export(
             f"options {sorted(options)} apply to the parameter formats "
             f"({', '.join(_PARAM_WRITERS)}), not to {fmt!r}"
         )
+    if offsets_only and fmt != "motioncal":
+        raise CalibrationError(f"offsets_only applies to the motioncal format, not to {fmt!r}")
     data: str | bytes
     if fmt == "c":
         data = c_header(cal, prefix=prefix)
@@ -120,7 +125,7 @@ def export(
     elif fmt == "json":
         data = cal.to_json()
     elif fmt == "motioncal":
-        data = motioncal_packet(cal, counts_per_unit=counts_per_unit)
+        data = motioncal_packet(cal, counts_per_unit=counts_per_unit, offsets_only=offsets_only)
     elif fmt in ("js", "js-espruino"):
         form = "esm" if fmt == "js" else "espruino"
         data = js_module(cal, prefix=prefix, form=form)
@@ -151,7 +156,8 @@ def write_outputs(
 
     Files: ``calibration.json``, ``<prefix>_calibration.h`` (float),
     ``<prefix>_calibration_fixed.h`` (only when every part has raw counts), ``motioncal.bin``
-    (when there is a magnetometer or accelerometer part with a symmetric matrix), and per
+    (when the magnetometer's matrix is symmetric and unrotated; it carries the accelerometer's
+    and gyroscope's offsets only, see :func:`motioncal_losses`), and per
     sensor in ``points_by_sensor`` (raw (N, 3) readings) ``report_<sensor>.txt`` and, when
     ``plot`` and matplotlib is installed, ``report_<sensor>.png``.
     """
@@ -169,7 +175,7 @@ def write_outputs(
     if all(cal.part(s).raw_unit == "counts" for s in cal.sensors):
         paths["c-fixed"] = export(cal, "c-fixed", out / f"{p}_calibration_fixed.h", prefix=p)
     try:
-        paths["motioncal"] = export(cal, "motioncal", out / "motioncal.bin")
+        paths["motioncal"] = export(cal, "motioncal", out / "motioncal.bin", offsets_only=True)
     except CalibrationError:
         pass  # e.g. a non-symmetric magnetometer matrix: the headers still carry it
     for sensor, pts in (points_by_sensor or {}).items():

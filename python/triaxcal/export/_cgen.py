@@ -257,3 +257,21 @@ def _c_poly_array(name: str, poly: np.ndarray, fmt: Any, ctype: str) -> list[str
     rows = ", ".join("{" + ", ".join(fmt(v) for v in row) + "}" for row in poly)
     return [f"TRIAXCAL_UNUSED static const {ctype} {name}[{len(poly)}][3] = {{{rows}}};"]
 
+
+def _blocks(cal: Calibration) -> list[tuple[str, SensorCalibration, str | None]]:
+    """``(name, part, note)`` per block of a header: every part, and for a part with an
+    alignment a second block ``<sensor>_aligned`` whose matrix is ``rotation @ matrix`` (its
+    output is in the frame the alignment turns into; ``note`` says so)."""
+    out: list[tuple[str, SensorCalibration, str | None]] = []
+    for sensor in cal.sensors:
+        part = cal.part(sensor)
+        out.append((sensor, part, None))
+        al = part.alignment
+        if al is not None:
+            folded = part.replace(matrix=al.rotation @ part.matrix, alignment=None)
+            mnt = ("" if al.mounting is None else
+                   f"; mounting {al.mounting} + {al.mounting_residual_deg:.3g} deg")
+            note = (f"{sensor}_aligned: the {sensor} calibration followed by its alignment, "
+                    f"out = R * matrix * (raw - offset), in the {al.to} frame{mnt}")
+            out.append((f"{sensor}_aligned", folded, note))
+    return out

@@ -200,3 +200,36 @@ def check_range(value: float, lo: float, hi: float, name: str, why: str) -> floa
     if not (lo <= value <= hi):
         raise CalibrationError(f"{name} = {value:.6g} is outside {lo:g}..{hi:g}: {why}")
     return value
+
+
+def mag_mounting(cal: Calibration, fmt: str, param: str) -> Any:
+    """The right-angle mounting of the magnetometer's alignment, for ``COMPASS_ORIENTn`` /
+    ``CAL_MAGn_ROT``: None without an alignment; refuses one no right-angle rotation is near;
+    warns (:class:`~triaxcal.methods.alignment.AlignmentWarning`) when more than 1 deg of it
+    is left out."""
+    import warnings
+
+    from ..methods.alignment import AlignmentWarning
+    from ..rotations import mounting, nearest_mounting
+
+    part = cal.mag
+    if part is None or part.alignment is None:
+        return None
+    al = part.alignment
+    if al.to != "accel":
+        raise CalibrationError(f"{fmt}'s {param} turns the compass into the vehicle's frame; "
+                               f"this alignment turns it into the {al.to}'s")
+    if al.mounting is None:
+        near, ang = nearest_mounting(al.rotation)
+        raise CalibrationError(
+            f"{fmt}'s {param} holds right-angle rotations only; this magnetometer's alignment "
+            f"is {ang:.1f} deg from the nearest ({near.name}): mount the sensor square, or "
+            "export without the alignment (--no-alignment; cal.mag.replace(alignment=None))")
+    m = mounting(al.mounting)
+    resid = float(al.mounting_residual_deg or 0.0)
+    if resid > 1.0:
+        warnings.warn(
+            f"{fmt}'s {param} holds the right-angle mounting {m.name}; the remaining "
+            f"{resid:.2f} deg of the magnetometer-to-accelerometer alignment are left out "
+            "(headings may be off by about as much)", AlignmentWarning, stacklevel=4)
+    return m

@@ -12,6 +12,7 @@ from ..units import per_unit
 from ._cgen import (
     _AX,
     _OFFD,
+    _blocks,
     _c_comment,
     _c_poly_array,
     _cf,
@@ -38,7 +39,10 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
     temperature terms add ``_TEMP_REF_C``, ``<prefix>_<sensor>_offset_poly[K][3]`` (and
     ``_gain_poly``) and ``<prefix>_<sensor>_apply_t(raw, temp_c, out)``; ``_apply`` then
     applies the calibration at the reference temperature. The comment block gives units, the
-    fit quality and a test vector (also as ``_test_raw`` / ``_test_out`` arrays).
+    fit quality and a test vector (also as ``_test_raw`` / ``_test_out`` arrays). A part with an
+    alignment (magnetometer to accelerometer) adds a block ``<sensor>_aligned`` whose matrix is
+    ``rotation @ matrix``: ``<prefix>_mag_aligned_apply`` gives the field in the accelerometer's
+    frame.
 
     Parameters
     ----------
@@ -56,13 +60,13 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
     guard = _guard(p, "CALIBRATION")
     comment: list[str] = []
     code: list[str] = []
-    for sensor in cal.sensors:
-        part = cal.part(sensor)
+    for sensor, part, note in _blocks(cal):
         S = f"{P}_{sensor.upper()}"
         s = f"{p}_{sensor}"
         traw = _test_raw(part)
         tt = part.temperature.temp_ref_c if part.temperature is not None else None
         tout = part.apply(traw, temperature=tt)
+        comment += ["", note] if note else []
         comment += [
             "",
             f"{sensor}: raw {part.raw_unit} -> calibrated {part.unit}; offset in "

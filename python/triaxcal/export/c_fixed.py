@@ -23,6 +23,7 @@ from ..errors import CalibrationError
 from ._cgen import (
     _AX,
     _OFFD,
+    _blocks,
     _c_comment,
     _c_poly_array,
     _fmt,
@@ -195,14 +196,14 @@ def c_fixed_header(
         "up by an arithmetic right shift. out = calibrated value * OUT_SCALE (within 1 count).",
     ]
     code: list[str] = []
-    for sensor in cal.sensors:
-        part = cal.part(sensor)
+    for sensor, part, note in _blocks(cal):
         if part.raw_unit != "counts":
             raise CalibrationError(
                 f"the fixed-point header needs integer raw readings; the {sensor} part's raw "
                 f"unit is {part.raw_unit!r}. Fit raw counts, or use --format c"
             )
-        sc = out_scale.get(sensor) if isinstance(out_scale, Mapping) else out_scale
+        base = sensor.removesuffix("_aligned")
+        sc = out_scale.get(base) if isinstance(out_scale, Mapping) else out_scale
         fp = fixed_point(part, out_scale=sc)
         num, den = _fraction(fp.out_scale)
         S = f"{P}_{sensor.upper()}"
@@ -211,6 +212,7 @@ def c_fixed_header(
         texp = apply_fixed(fp, traw)[0]
         tt = part.temperature.temp_ref_c if part.temperature is not None else None
         exact = part.apply(traw.astype(float), temperature=tt) * fp.out_scale
+        comment += ["", note] if note else []
         comment += [
             "",
             (f"{sensor}: raw {part.raw_unit} (int16_t) -> out in 1/{_fmt(fp.out_scale)} "

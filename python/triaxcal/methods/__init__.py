@@ -11,8 +11,19 @@
 * :mod:`~triaxcal.methods.bootstrap` -- bootstrap confidence intervals of fit coefficients.
 * :mod:`~triaxcal.methods.noise` -- noise figures (random walks, bias instability) and Kalibr's
   noise keys.
+* :mod:`~triaxcal.methods.yaw` -- yaw-only magnetometer calibration (turns about the
+  vertical, the vertical part from the World Magnetic Model).
+* :mod:`~triaxcal.methods.alignment` -- magnetometer-to-accelerometer alignment, mounting
+  rotation, dip angle, tilt-compensated heading.
 """
 
+from .alignment import (
+    AlignmentWarning,
+    MagAccelAlignment,
+    align_mag_accel,
+    axis_heading,
+    heading_errors,
+)
 from .allan import AllanAccumulator, AllanDeviation, allan
 from .bootstrap import BootstrapIntervals, bootstrap
 from .gyro import (
@@ -36,6 +47,7 @@ from .static import (
     tilt_rig,
 )
 from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .yaw import YawCalibration, fit_yaw
 
 __all__ = [
     "AllanAccumulator",
@@ -48,6 +60,13 @@ __all__ = [
     "kalibr_noise",
     "noise_figures",
     "plot_allan",
+    "YawCalibration",
+    "fit_yaw",
+    "AlignmentWarning",
+    "MagAccelAlignment",
+    "align_mag_accel",
+    "axis_heading",
+    "heading_errors",
     "FerrarisCalibration",
     "GyroBias",
     "GyroGains",
