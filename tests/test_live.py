@@ -373,13 +373,19 @@ def test_send_goes_over_the_open_port_with_the_echo_check(tmp_path):
             while st.refresh()["sensors"]["accel"]["poses"] < 45:
                 assert time.monotonic() < deadline and th.is_alive()
                 time.sleep(0.3)
+            # as `triaxcal send`: the packet cannot carry the accelerometer's gains, so it is
+            # refused until the loss is accepted (--offsets-only)
             res = actions.send(st)
+            assert not res["ok"] and res["needs_offsets_only"], res
+            assert "cannot carry" in res["message"] and dev.motioncal is None
+            res = actions.send(st, offsets_only=True)
             assert res["ok"], res
-            assert "the board confirmed it" in res["message"]
+            assert "the board confirmed it" in res["message"] and "not in the packet" in res[
+                "message"]
             saved = Calibration.load(tmp_path / "calibration.json")
             from triaxcal.export import decode_motioncal, motioncal_packet
 
-            assert dev.motioncal == decode_motioncal(motioncal_packet(saved))
+            assert dev.motioncal == decode_motioncal(motioncal_packet(saved, offsets_only=True))
         finally:
             stop.set()
             dev.silence(10.0)  # a streaming capture stops once the line goes quiet

@@ -173,6 +173,10 @@ def _save(state: LiveState) -> tuple[Calibration, Path, str]:
     return Calibration.load(path), path, msg
 
 
+class _NeedsOffsetsOnly(CalibrationError):
+    """Send refused because the packet would drop gains (the page then offers offsets only)."""
+
+
 def _run(state: LiveState, action: str, fn: Any) -> dict[str, Any]:
     if not _ACTION_LOCK.acquire(timeout=0.1):
         return {"action": action, "ok": False, "time": time.time(),
@@ -182,6 +186,8 @@ def _run(state: LiveState, action: str, fn: Any) -> dict[str, Any]:
             result = {"action": action, "ok": True, **fn()}
         except CalibrationError as exc:
             result = {"action": action, "ok": False, "message": str(exc)}
+            if isinstance(exc, _NeedsOffsetsOnly):
+                result["needs_offsets_only"] = True
     finally:
         _ACTION_LOCK.release()
     result["time"] = time.time()
@@ -220,10 +226,12 @@ def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
     return _run(state, f"export-{fmt}", go)
 
 
-def send(state: LiveState) -> dict[str, Any]:
+def send(state: LiveState, *, offsets_only: bool = False) -> dict[str, Any]:
     """Send to board: Save, then the MotionCal packet over the open port, with the echo check
-    of ``triaxcal send``."""
-    from ..export import echo_matches, motioncal_packet, parse_motioncal_echo
+    of ``triaxcal send``. The packet carries the accelerometer's and gyroscope's offsets but
+    not their gains: as ``triaxcal send`` does, such a calibration is refused (the answer has
+    ``needs_offsets_only``) unless ``offsets_only`` (``--offsets-only``) accepts the loss."""
+    from ..export import echo_matches, motioncal_losses, motioncal_packet, parse_motioncal_echo
 
     def go() -> dict[str, Any]:
         reader = state._reader
@@ -236,7 +244,13 @@ def send(state: LiveState) -> dict[str, Any]:
                 "polled binary cannot carry the board's echo while capturing: stop the capture "
                 "(Ctrl-C), then `triaxcal send calibration.json --port PORT`")
         cal, cal_path, msg = _save(state)
-        packet = motioncal_packet(cal)
+        losses = motioncal_losses(cal)
+        if losses and not offsets_only:
+            raise _NeedsOffsetsOnly(
+                f"{msg}; not sent: the MotionCal packet cannot carry " + "; ".join(losses)
+                + ". Send the offsets only (as `triaxcal send --offsets-only`), or export a C "
+                "header, which carries everything")
+        packet = motioncal_packet(cal, offsets_only=offsets_only)
         state._echo = bytearray()
         try:
             reader.write(packet)
@@ -261,8 +275,9 @@ def send(state: LiveState) -> dict[str, Any]:
                 f"{msg}; but the board echoed different values: " + "; ".join(bad[:5])
                 + " -- the packet may have been garbled; send it again")
         cal1, cal2 = echo
+        lost = ("" if not losses else " -- not in the packet: " + "; ".join(losses))
         return {"message": f"{msg}; sent {len(packet)}-byte MotionCal packet to {state.port}; "
-                           "the board confirmed it (Cal1: "
+                           f"the board confirmed it{lost} (Cal1: "
                            + ", ".join(f"{v:.4f}" for v in cal1) + "; Cal2: "
                            + ", ".join(f"{v:.4f}" for v in cal2) + ")",
                 "path": str(cal_path)}

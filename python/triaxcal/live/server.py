@@ -10,10 +10,11 @@ Routes (all under the one origin the server listens on; nothing is fetched from 
 * ``GET /api/events``: server-sent events, one ``data:`` message per published document,
   ``{"state": ..., "points": {...}}`` where ``points`` holds only the sets that changed since
   the previous message to this client;
-* ``POST /api/save``, ``/api/export/c``, ``/api/export/c-fixed``, ``/api/send``,
-  ``/api/reset``: the buttons (:mod:`triaxcal.live.actions`). They need the header
-  ``X-Triaxcal: 1``, which a page of another origin cannot send without a CORS pre-flight
-  that this server never grants, so other web sites cannot press the buttons.
+* ``POST /api/save``, ``/api/export/c``, ``/api/export/c-fixed``, ``/api/send`` (with
+  ``?offsets_only=1`` as ``triaxcal send --offsets-only``), ``/api/reset``: the buttons
+  (:mod:`triaxcal.live.actions`). They need the header ``X-Triaxcal: 1``, which a page of
+  another origin cannot send without a CORS pre-flight that this server never grants, so
+  other web sites cannot press the buttons.
 
 Bound to a loopback address (the default), the server also refuses requests whose ``Host``
 header is not that address or ``localhost`` (no DNS rebinding).
@@ -198,7 +199,8 @@ def create_app(state: LiveState, *, host: str = DEFAULT_HOST,
               methods=["POST"]),
         Route("/api/export/c-fixed", button(lambda r: actions.export_header(state, "c-fixed")),
               methods=["POST"]),
-        Route("/api/send", button(lambda r: actions.send(state)), methods=["POST"]),
+        Route("/api/send", button(lambda r: actions.send(
+            state, offsets_only=r.query_params.get("offsets_only") == "1")), methods=["POST"]),
         Route("/api/reset", button(lambda r: actions.reset(state)), methods=["POST"]),
     ]
     middleware = []

@@ -592,6 +592,10 @@ async function press(path, label) {
     const body = await r.json();
     T.lastAction = body;
     showAction(body);
+    if (body.needs_offsets_only && confirm(body.message + "\n\nSend the offsets only?")) {
+      busy = false;
+      return await press(path + "?offsets_only=1", label);
+    }
   } catch (e) {
     showAction({ ok: false, message: "no answer from triaxcal: " + e });
   } finally {
