@@ -355,6 +355,30 @@ def test_server_routes_and_guards(recording, tmp_path):
             st.stop()
 
 
+def test_port_taken_moves_to_the_next_and_other_hosts_are_flagged(tmp_path):
+    import socket
+
+    st = LiveState(tmp_path / "s.csv", NAMES)
+    first = LiveServer(st, port=0)
+    try:
+        taken = first.port
+        nxt = LiveServer(st, port=taken)  # taken: the next free one
+        try:
+            assert nxt.port != taken and taken < nxt.port <= taken + 20
+            assert not nxt.public and nxt.url == f"http://127.0.0.1:{nxt.port}/"
+        finally:
+            nxt.stop()
+    finally:
+        first.stop()
+    anywhere = LiveServer(st, host="0.0.0.0", port=0)
+    try:
+        assert anywhere.public and socket.gethostname() in anywhere.url
+    finally:
+        anywhere.stop()
+    with pytest.raises(CalibrationError, match="http-port"):
+        LiveServer(st, port=70000)
+
+
 def test_send_goes_over_the_open_port_with_the_echo_check(tmp_path):
     imu = SimIMU(4)
     with SimDevice(imu, globe_script(hold_s=0.6, seed=4), speed=30, loop=True, seed=4) as dev:
@@ -462,19 +486,20 @@ def test_capture_live_cli_serves_and_ctrl_c_saves_and_exits(tmp_path):
 
 @pytest.mark.slow
 def test_demo_live_ends_on_the_session_fit_and_lingers_until_ctrl_c(tmp_path):
-    proc = _spawn(["demo", "--live", "--no-browser", "--http-port", "0", "--speed", "40",
+    proc = _spawn(["demo", "--live", "--no-browser", "--http-port", "0", "--speed", "20",
                    "--no-plot", "--quiet", "--out", "d"], tmp_path)
     try:
         url = _url_from(proc)
         err: list[str] = []
         drain = threading.Thread(target=_drain, args=(proc.stderr, err), daemon=True)
         drain.start()
-        deadline = time.monotonic() + 180
+        deadline = time.monotonic() + 240
         while True:
+            assert proc.poll() is None, "".join(err)  # the demo ended early: say why
             doc = json.loads(_get(url + "api/state")[2])
             if doc["status"] == "finished" and (tmp_path / "d" / "results.json").exists():
                 break
-            assert time.monotonic() < deadline and proc.poll() is None
+            assert time.monotonic() < deadline, doc["next"]
             time.sleep(0.5)
         # the page shows the session's fit, and every check is green at the end of the demo
         for sensor in ("accel", "mag"):

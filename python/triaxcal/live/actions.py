@@ -235,7 +235,7 @@ def send(state: LiveState, *, offsets_only: bool = False) -> dict[str, Any]:
 
     def go() -> dict[str, Any]:
         reader = state._reader
-        if reader is None or state.status == "finished":
+        if reader is None or state.status in ("fitting", "finished"):
             raise CalibrationError(
                 "the capture has ended, so the port is closed: send the saved calibration with "
                 "`triaxcal send calibration.json --port PORT`")

@@ -266,6 +266,7 @@ class LiveState:
         else:
             self.mag_radius, self.mag_unit = None, "counts"
         self._lock = threading.RLock()
+        self._refresh_lock = threading.Lock()  # one refit-and-publish cycle at a time
         self._publish_cond = threading.Condition()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -412,6 +413,10 @@ class LiveState:
 
         ``force`` refits and recomputes everything even if nothing changed (benchmarks).
         Returns the document (also :meth:`document`)."""
+        with self._refresh_lock:
+            return self._refresh(force)
+
+    def _refresh(self, force: bool) -> dict[str, Any]:
         t0 = time.perf_counter()
         if force:
             self._fitted_versions = {"accel": -1, "mag": -1}
@@ -421,7 +426,7 @@ class LiveState:
             accel_version = self._accel_version
             mag_pts = self._magbuf.points
             mag_version = self._magbuf.version
-            final = self.status == "finished"
+            final = self.status in ("fitting", "finished")
         work = {"accel": (accel_version, poses[:, self.cols["accel"]] if "accel" in self.cols
                           and len(poses) else np.zeros((0, 3))),
                 "mag": (mag_version, mag_pts)}
@@ -609,7 +614,7 @@ class LiveState:
             "fit_commands": self.fit_commands(),
             "actions": {"last": self.last_action,
                         "send_possible": self._reader is not None and not getattr(
-                            self._reader, "polled", False) and self.status != "finished"},
+                            self._reader, "polled", False) and self.status == "capturing"},
             "options": {"model": self.options.model, "sigma": self.options.sigma,
                         "rounds": self.options.rounds, "accel_radius": self.options.accel_radius,
                         "mag_radius": self.options.mag_radius,
@@ -674,6 +679,9 @@ class LiveState:
         return out
 
     def _next_step(self, stream: dict[str, Any], hints: list[tuple[str, str, bool]]) -> str:
+        if self.status == "fitting":
+            return (f"Capture ended ({self.stopped_by}): fitting the whole session file as "
+                    "`triaxcal fit` does...")
         if self.status == "finished":
             if self.final_error:
                 return f"Capture ended ({self.stopped_by}); the session could not be fitted: " \
@@ -804,13 +812,21 @@ class LiveState:
 
         self.finish_poses()
         with self._lock:
-            self.status = "finished"
+            self.status = "fitting"  # the live fits stop; the page says the file is fitted
             self.stopped_by = getattr(result, "stopped_by", None)
+        self.refresh()
+        error = None
         try:
             outcomes = fit_session(self)
         except CalibrationError as exc:
-            self.final_error = str(exc)
+            error = str(exc)
             outcomes = {}
+        with self._refresh_lock:
+            self._finish_fits(outcomes, error)
+        self.refresh()
+
+    def _finish_fits(self, outcomes: dict[str, Any], error: str | None) -> None:
+        self.final_error = error
         for sensor, out in outcomes.items():
             p = out.part
             st = p.stats
@@ -830,7 +846,8 @@ class LiveState:
                 with self._lock:
                     self._final_points["accel"] = np.asarray(out.points, dtype=np.float64)
                     self._accel_version += 1
-        self.refresh()
+        with self._lock:
+            self.status = "finished"
 
 
 def _check(key: str, name: str, value: float, unit: str, limit: float, op: str,

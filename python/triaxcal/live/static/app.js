@@ -124,8 +124,9 @@ function apply(st) {
 
 // ------------------------------------------------------------------ header, banner, guide
 function header(st) {
-  const dotClass = st.status === "finished" ? "done" : st.stream.connected ? "on" : "off";
-  const what = st.status === "finished" ? `capture ended (${esc(st.stopped_by || "")})`
+  const ended = st.status === "finished" || st.status === "fitting";
+  const dotClass = ended ? "done" : st.stream.connected ? "on" : "off";
+  const what = ended ? `capture ended (${esc(st.stopped_by || "")})`
     : st.status === "waiting" ? "waiting for data" : "capturing";
   setHTML($("source"), `<span class="dot ${dotClass}"></span>${what} &middot; ${esc(shortPath(st.port))}
     (${esc(st.protocol)}) &rarr; ${esc(st.session.split(/[\\/]/).pop())} &middot;
@@ -137,7 +138,7 @@ function header(st) {
     ["dropped", num("stream.dropped", s.dropped, s.dropped), s.dropped > 0],
     ["resyncs", num("stream.resyncs", s.resyncs, s.resyncs), s.resyncs > 0],
     ["last frame", age === null ? "-" : fmt(age, 1) + " s ago",
-     age !== null && age > 2 && st.status !== "finished"],
+     age !== null && age > 2 && !ended],
     ["reconnects", num("stream.reconnects", s.reconnects, s.reconnects), false],
   ];
   setHTML($("health"), items.map(([k, v, bad]) =>
