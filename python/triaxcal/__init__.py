@@ -47,6 +47,7 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .fleet.autocal import AutoCalibration, autocalibrate
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
 from .io.tables import Table, read_table
@@ -201,4 +202,6 @@ __all__ = [
     "plot_report",
     "quality_report",
     "write_outputs",
+    "AutoCalibration",
+    "autocalibrate",
 ]

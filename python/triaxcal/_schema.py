@@ -56,6 +56,8 @@ KNOWN_MODELS = (
     "manual",
     "offset",
     "yaw",
+    "autocal-vanhees",  # free-living auto-calibration (triaxcal.autocalibrate)
+    "factory",  # a maker's calibration read from a file header (GENEActiv)
 )
 
 #: Highest degree of the temperature polynomials (``offset_poly``/``gain_poly`` rows - 1).

@@ -53,6 +53,8 @@ def as_samples(
     if arr.shape[0] < min_rows:
         raise CalibrationError(f"{name} needs at least {min_rows} rows, got {arr.shape[0]}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if not arr.flags.aligned:  # e.g. unpickled from a network buffer: the core needs aligned
+        arr = arr.copy()
     if finite and not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
         raise NonFiniteError(

@@ -14,8 +14,8 @@ from ..io.files import os_error_message
 from ._help import PlainHelpFormatter
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("demo", "capture", "fit", "export", "report", "send", "sphere_center", "tilt_rig",
-            "gyro_gains", "temperature", "noise", "diff")
+COMMANDS = ("demo", "capture", "fit", "batch", "export", "report", "send", "sphere_center",
+            "tilt_rig", "gyro_gains", "temperature", "noise", "diff")
 
 
 def build_parser() -> argparse.ArgumentParser:

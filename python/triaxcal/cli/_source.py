@@ -19,7 +19,7 @@ from ..errors import CalibrationError
 from ..io.logs import is_log, read_log
 from ..io.recording import LogRecording
 
-__all__ = ["Source", "add_source_options", "autopilot_lines", "load_source"]
+__all__ = ["Source", "add_source_options", "autopilot_lines", "load_source", "table_source"]
 
 _G = {"m/s^2": 9.80665, "g": 1.0, "mg": 1000.0}
 
@@ -66,6 +66,24 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
+    """Readings of ``sensor`` from a table already read (:func:`triaxcal.io.tables.read_table`):
+    the table half of :func:`load_source` (``triaxcal batch`` fits each board so)."""
+    from ..io.tables import pick_columns
+    from ._poses import settings_from_args
+    from .fit import pose_points
+
+    cols = pick_columns(table, getattr(args, "columns", None), sensor)
+    pose_stats: dict[str, Any] = {}
+    if getattr(args, "poses", False):  # the capture's pose detection, every sensor
+        pts, pose_stats = pose_points(table, cols, settings_from_args(args))
+    else:
+        pts = table.data[:, cols]
+    return Source(points=pts, path=table.path, sha256=table.sha256, table=table,
+                  columns=[table.names[c] if table.names else c for c in cols],
+                  extra=pose_stats)
+
+
 def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Source:
     """Readings of ``sensor`` from ``path`` as ``args`` (``--columns``, ``--poses``, the log
     options) ask; the same for ``fit``, ``report`` and every command that takes a session."""
@@ -79,20 +97,10 @@ def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Sour
                 f"--instance, --topic and --undo-autopilot-cal apply to logs (.ulg, .bin, .bag, "
                 f".db3, .mcap); {p} is read as a table"
             )
-        from ..io.tables import pick_columns, read_table
-        from ._poses import settings_from_args
-        from .fit import pose_points
+        from ..io.tables import read_table
 
         table = read_table(p, skip_bad_lines=bool(getattr(args, "skip_bad_lines", False)))
-        cols = pick_columns(table, getattr(args, "columns", None), sensor)
-        pose_stats: dict[str, Any] = {}
-        if getattr(args, "poses", False):  # the capture's pose detection, every sensor
-            pts, pose_stats = pose_points(table, cols, settings_from_args(args))
-        else:
-            pts = table.data[:, cols]
-        return Source(points=pts, path=p, sha256=table.sha256, table=table,
-                      columns=[table.names[c] if table.names else c for c in cols],
-                      extra=pose_stats)
+        return table_source(table, sensor, args)
     if getattr(args, "columns", None):
         raise CalibrationError(f"--columns applies to tables; {p} is a log: choose the sensor "
                                "with --sensor (and --instance / --topic)")

@@ -29,6 +29,12 @@ examples:
   triaxcal capture --port /dev/ttyACM0 --protocol framed --live --out s.csv
   triaxcal capture --port /dev/ttyACM0 --protocol binary --channels 7 --out s.csv
   triaxcal capture --port COM3 --protocol raw --samples 5000 --out s.csv
+
+several boards at once (a production rig): one session file per board in --out-dir, named by
+the serial number each board reports (command 'I', answer 'ID:<serial>'), else by its port;
+one status line per board; an unplugged board is waited for while the others go on:
+  triaxcal capture --port /dev/ttyUSB0 --port /dev/ttyUSB1 --protocol framed --poses 30 \
+                   --out-dir sessions/
 """
 
 
@@ -82,7 +88,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--port", required=True, help="serial port: /dev/ttyUSB0, /dev/ttyACM0, COM3")
+    p.add_argument("--port", required=True, action="append",
+                   help="serial port: /dev/ttyUSB0, /dev/ttyACM0, COM3; repeat it to capture "
+                        "several boards at once (with --out-dir)")
     p.add_argument("--baud", type=_positive_int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--protocol", required=True, choices=PROTOCOLS,
                    help="wire protocol: binary (legacy, polled unless --stream), framed "
@@ -107,7 +115,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       help="stop after N still poses")
     p.add_argument("--seconds", type=float, default=None, metavar="S",
                    help="stop after S seconds")
-    p.add_argument("--out", required=True, metavar="SESSION.csv", help="session CSV to write")
+    p.add_argument("--out", metavar="SESSION.csv", help="session CSV to write (one port)")
+    p.add_argument("--out-dir", metavar="DIR",
+                   help="folder for one session CSV per board, <serial number>.csv (several "
+                        "ports)")
+    p.add_argument("--no-id", action="store_true",
+                   help="with --out-dir: do not ask the boards for their serial number; name "
+                        "the files after the ports")
     exist = p.add_mutually_exclusive_group()
     exist.add_argument("--append", action="store_true",
                        help="add to an existing session CSV with the same columns")
@@ -132,8 +146,15 @@ def run(args: argparse.Namespace) -> int:
     channels = args.channels
     if channels is None and args.protocol != "raw":
         channels = 10
+    if args.out_dir is not None or len(args.port) > 1:
+        from ._multicapture import run_many
+
+        return run_many(args, channels)
+    if args.out is None:
+        raise CalibrationError("give --out SESSION.csv (or --out-dir DIR)")
+    port = args.port[0]
     reader = SerialReader(
-        args.port,
+        port,
         protocol=args.protocol,
         channels=channels,
         baud=args.baud,
@@ -148,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         how = "polled" if reader.polled else "streaming"
         print(
-            f"triaxcal capture: {args.port} at {args.baud} baud, {args.protocol} ({how}), "
+            f"triaxcal capture: {port} at {args.baud} baud, {args.protocol} ({how}), "
             f"{len(names)} channels ({' '.join(names)}) -> {args.out}; Ctrl-C stops",
             file=out,
         )

@@ -40,7 +40,14 @@ from ..poses import PoseSettings, sensor_columns, session_poses
 from ..units import implausible_radius, unit_factor
 from ._field import add_field_options, alignment_for, expected_from_args, field_stats, yaw_part
 from ._poses import add_pose_options
-from ._source import Source, add_source_options, autopilot_lines, autopilot_stats, load_source
+from ._source import (
+    Source,
+    add_source_options,
+    autopilot_lines,
+    autopilot_stats,
+    load_source,
+    table_source,
+)
 
 __all__ = ["SENSOR_COLUMNS", "Table", "parse_radius", "pick_columns", "read_table"]
 
@@ -208,8 +215,9 @@ def pose_points(
     return pts, stats
 
 
-def fit_file(args: argparse.Namespace) -> FitOutcome:
-    """Read ``args.data``, pick columns, optionally reduce to poses, fit robustly."""
+def fit_file(args: argparse.Namespace, *, table: Table | None = None) -> FitOutcome:
+    """Read ``args.data`` (or take ``table``, already read), pick columns, optionally reduce
+    to poses, fit robustly."""
     from ..select import fit_robust
 
     sensor = args.sensor or "accel"
@@ -217,7 +225,8 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     expected = expected_from_args(args, sensor)
     if (getattr(args, "yaw_only", False) or getattr(args, "align", False)) and sensor != "mag":
         raise CalibrationError("--yaw-only and --align apply to --sensor mag")
-    src = load_source(args.data, sensor, args)
+    src = load_source(args.data, sensor, args) if table is None else table_source(
+        table, sensor, args)
     table, pts = src.table, src.points
     if table is not None:
         notes += [f"note: {n}" for n in table.notes]
@@ -298,6 +307,11 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
                       reason=rob.model_reason, table=table, source=src, notes=notes,
                       expected=expected)
+
+
+def fit_table(table: Table, args: argparse.Namespace) -> FitOutcome:
+    """:func:`fit_file` on a table already read (``triaxcal batch`` fits each board so)."""
+    return fit_file(args, table=table)
 
 
 def _fields(part: SensorCalibration) -> dict[str, Any]:

@@ -52,6 +52,7 @@ from .truth import (
     temp_c_from_raw,
     temp_raw_from_c,
 )
+from .wearable import FreeLivingSim, WearableTruth
 
 __all__ = [
     "ACCEL_COUNTS_PER_G",
@@ -63,6 +64,8 @@ __all__ = [
     "MAG_COUNTS_PER_UT",
     "NoiseTruth",
     "Faults",
+    "FreeLivingSim",
+    "WearableTruth",
     "Recording",
     "Script",
     "SensorTruth",
