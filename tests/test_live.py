@@ -287,7 +287,7 @@ def test_bad_options_say_what_is_wrong(kw, word):
         LiveOptions(**kw)
 
 
-def test_missing_extra_names_it(monkeypatch, tmp_path):
+def test_missing_extra_names_it(monkeypatch, tmp_path, capsys):
     import importlib.util
 
     from triaxcal.live import server
@@ -299,6 +299,12 @@ def test_missing_extra_names_it(monkeypatch, tmp_path):
         server.LiveServer(LiveState(tmp_path / "s.csv", NAMES), port=0)
     assert main(["capture", "--port", "/nonexistent", "--protocol", "framed", "--out",
                  str(tmp_path / "x.csv"), "--live"]) == 1
+    monkeypatch.undo()
+    # one board per page: several ports with --live are refused before anything opens
+    assert main(["capture", "--port", "/nonexistent0", "--port", "/nonexistent1", "--protocol",
+                 "framed", "--out-dir", str(tmp_path / "many"), "--live"]) == 1
+    assert "--live shows one board" in capsys.readouterr().err
+    assert not (tmp_path / "many").exists()
 
 
 # ------------------------------------------------------------------------------ the server

@@ -146,6 +146,10 @@ def run(args: argparse.Namespace) -> int:
     channels = args.channels
     if channels is None and args.protocol != "raw":
         channels = 10
+    if args.live and (args.out_dir is not None or len(args.port) > 1):
+        raise CalibrationError(
+            "--live shows one board: capture one --port into --out SESSION.csv with it, or "
+            "drop --live for a capture of several boards")
     if args.out_dir is not None or len(args.port) > 1:
         from ._multicapture import run_many
 
