@@ -248,7 +248,7 @@ def test_tilt_rig_layouts_and_errors(section, tmp_path, capsys):
     assert "line 4" in _fails(capsys, "tilt-rig", bad, "--angle", "10", "-o", tmp_path / "b.json")
     assert "--columns" in _fails(capsys, "tilt-rig", section / "tilt.txt", "--angle", "10", "-o",
                                  tmp_path / "b.json")
-    assert "between 0 and 90" in _fails(capsys, "tilt-rig", section / "tilt.txt", "--angle",
+    assert "in (0, 90), got 95" in _fails(capsys, "tilt-rig", section / "tilt.txt", "--angle",
                                         "95", "--columns", "2,3,4", "-o", tmp_path / "b.json")
 
 

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _options as opt
 from ._validate import as_samples
 from .errors import CalibrationError
 
@@ -517,26 +518,23 @@ class _Segmenter:
 
 
 def _columns(value: Any, what: str, n_channels: int | None) -> tuple[int, int, int]:
+    bad = CalibrationError(
+        f"{what} must name 3 channels (x, y, z) by whole-number index >= 0, got {value!r}"
+    )
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 3:
+        raise bad
     try:
-        cols = tuple(int(c) for c in value)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{what} must name 3 channels (x, y, z), got {value!r}") from None
-    if len(cols) != 3 or any(isinstance(c, bool) for c in value):
-        raise CalibrationError(f"{what} must name 3 channels (x, y, z), got {value!r}")
-    if n_channels is not None and not all(0 <= c < n_channels for c in cols):
+        a, b, c = (opt.integer(v, what, ge=0) for v in value)
+    except CalibrationError:
+        raise bad from None
+    cols = (a, b, c)
+    if n_channels is not None and not all(0 <= k < n_channels for k in cols):
         raise CalibrationError(f"{what} {cols} out of range for {n_channels} channels")
-    return cols  # type: ignore[return-value]
+    return cols
 
 
 def _positive(value: Any, what: str) -> float | None:
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise CalibrationError(f"{what} must be a number > 0 (or None: learn it), got {value!r}")
-    v = float(value)
-    if not (math.isfinite(v) and v > 0):
-        raise CalibrationError(f"{what} must be > 0, in the sensor's units; got {v}")
-    return v
+    return opt.optional_number(value, what, gt=0, hint="in the sensor's units, or None: learn it")
 
 
 def _options(
@@ -556,28 +554,16 @@ def _options(
     mag_threshold: float | None = None,
     holdoff_samples: int = 0,
 ) -> dict:
-    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
-        raise CalibrationError(f"window must be a whole number of samples >= 1, got {window!r}")
-    if not (isinstance(min_windows, (int, np.integer)) and min_windows >= 2):
-        raise CalibrationError(
-            f"min_windows must be a whole number >= 2 (two windows to compare), got {min_windows!r}"
-        )
-    if max_windows is not None and not (
-        isinstance(max_windows, (int, np.integer)) and max_windows >= min_windows
-    ):
-        raise CalibrationError(f"max_windows must be None or >= min_windows, got {max_windows!r}")
-    upg = float(units_per_g)
-    if not (np.isfinite(upg) and upg > 0):
-        raise CalibrationError(f"units_per_g must be > 0 (16384 for counts at +-2 g), got {upg}")
-    thr = 0.07 * upg if threshold is None else float(threshold)
-    if not (np.isfinite(thr) and thr > 0):
-        raise CalibrationError(f"threshold must be > 0, in the sensor's units; got {thr}")
-    sep = thr if min_separation is None else float(min_separation)
-    if not (np.isfinite(sep) and sep >= 0):
-        raise CalibrationError(f"min_separation must be >= 0 (0 disables it), got {sep}")
-    mstd = thr if max_std is None else float(max_std)
-    if not (np.isfinite(mstd) and mstd > 0):
-        raise CalibrationError(f"max_std must be > 0, got {mstd}")
+    win = opt.integer(window, "window", ge=1, hint="samples per averaging window")
+    min_w = opt.integer(min_windows, "min_windows", ge=2, hint="two windows to compare")
+    max_w = None if max_windows is None else opt.integer(max_windows, "max_windows",
+                                                         ge=min_w, hint="or None")
+    upg = opt.number(units_per_g, "units_per_g", gt=0, hint="16384 for counts at +-2 g")
+    thr = 0.07 * upg if threshold is None else opt.number(
+        threshold, "threshold", gt=0, hint="in the sensor's units")
+    sep = thr if min_separation is None else opt.number(
+        min_separation, "min_separation", ge=0, hint="0 disables it")
+    mstd = thr if max_std is None else opt.number(max_std, "max_std", gt=0)
     cols = _columns(columns, "columns", n_channels)
     gcols = None if gyro_columns is None else _columns(gyro_columns, "gyro_columns", n_channels)
     mcols = None if mag_columns is None else _columns(mag_columns, "mag_columns", n_channels)
@@ -587,24 +573,20 @@ def _options(
             f"columns, gyro_columns and mag_columns overlap ({cols}, {gcols}, {mcols}): each "
             "sensor needs its own three channels"
         )
-    if isinstance(holdoff_samples, bool) or not isinstance(holdoff_samples, (int, np.integer)) \
-            or holdoff_samples < 0:
-        raise CalibrationError(
-            f"holdoff_samples must be a whole number of samples >= 0, got {holdoff_samples!r}"
-        )
+    holdoff = opt.integer(holdoff_samples, "holdoff_samples", ge=0, hint="samples")
     return {
-        "window": int(window),
+        "window": win,
         "threshold": thr,
-        "min_windows": int(min_windows),
+        "min_windows": min_w,
         "min_separation": sep,
         "max_std": mstd,
-        "max_windows": None if max_windows is None else int(max_windows),
+        "max_windows": max_w,
         "columns": cols,
         "gyro_columns": gcols,
         "gyro_threshold": _positive(gyro_threshold, "gyro_threshold"),
         "mag_columns": mcols,
         "mag_threshold": _positive(mag_threshold, "mag_threshold"),
-        "holdoff_samples": int(holdoff_samples),
+        "holdoff_samples": holdoff,
     }
 
 
@@ -918,38 +900,46 @@ def detect_still(
     StillDetection
     """
     arr = _as_samples(samples, allow_empty=False)[:, :3]
-    rate = float(rate_hz)
-    if not (np.isfinite(rate) and rate > 0):
-        raise CalibrationError(f"rate_hz must be > 0, got {rate_hz!r}")
+    rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
+    win_s = opt.number(window_s, "window_s", gt=0, hint="seconds, imu_tk uses 1-2")
+    rest_len = opt.number(rest_s, "rest_s", gt=0, hint="seconds of initial rest")
+    kk = opt.number(k, "k", gt=0, hint="threshold multiplier, imu_tk sweeps 1..10")
+    min_dur = opt.number(min_duration_s, "min_duration_s", ge=0, hint="seconds")
+    given_rest = opt.optional_number(rest_level, "rest_level", gt=0, hint="input units^2")
     n = arr.shape[0]
-    w = max(2, round(window_s * rate))
+    w = round(win_s * rate)
+    if w < 2:
+        raise CalibrationError(
+            f"window_s={win_s:g} s is {win_s * rate:.3g} samples at {rate:g} Hz; a variance "
+            "needs a window of at least 2 samples: pass a longer window_s"
+        )
     if w > n:
         raise CalibrationError(
-            f"only {n} samples, fewer than one {window_s} s window ({w} samples); record longer"
+            f"only {n} samples, fewer than one {win_s:g} s window ({w} samples); record longer"
         )
-    if rest_level is None:
-        nr = round(rest_s * rate)
+    if given_rest is None:
+        nr = round(rest_len * rate)
         if nr < w:
             raise CalibrationError(
-                f"rest_s={rest_s} s ({nr} samples) is shorter than the window ({w} samples); "
+                f"rest_s={rest_len:g} s ({nr} samples) is shorter than the window ({w} samples); "
                 "record a longer initial rest or pass rest_level"
             )
         if nr > n:
             raise CalibrationError(
-                f"rest_s={rest_s} s needs {nr} samples, only {n} recorded"
+                f"rest_s={rest_len:g} s needs {nr} samples, only {n} recorded"
             )
         rv = arr[:nr].var(axis=0)
         rest = float(np.sqrt((rv * rv).sum()))
+        if not (np.isfinite(rest) and rest > 0):
+            rest = np.finfo(float).tiny  # a perfectly constant rest (simulated data)
     else:
-        rest = float(rest_level)
-    if not (np.isfinite(rest) and rest > 0):
-        rest = np.finfo(float).tiny  # a perfectly constant rest (simulated data)
-    thr = float(k) * rest
+        rest = given_rest
+    thr = kk * rest
     level = _sliding_var_norm(arr, w)
     still = level < thr
     edges = np.flatnonzero(np.diff(np.concatenate(([0], still.astype(np.int8), [0]))))
     starts, ends = edges[0::2], edges[1::2]
-    min_n = round(min_duration_s * rate)
+    min_n = round(min_dur * rate)
     intervals: list[tuple[int, int]] = []
     rejected: list[Rejection] = []
     for a, b in zip(starts.tolist(), ends.tolist()):
@@ -957,7 +947,7 @@ def detect_still(
             intervals.append((a, b))
         else:
             rejected.append(
-                Rejection(a, b, TOO_SHORT, f"{(b - a) / rate:.3g} s < {min_duration_s} s")
+                Rejection(a, b, TOO_SHORT, f"{(b - a) / rate:.3g} s < {min_dur:g} s")
             )
     level.setflags(write=False)
     return StillDetection(intervals, rejected, rest, thr, level)

@@ -10,9 +10,9 @@ For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T
   measure ``capture``, ``demo`` and ``fit`` report too) that hold at least one calibrated
   direction, of every reading given (rejected ones too: coverage says where the board went);
 * the outliers rejected before the fit, by index;
-* warnings in plain language, each with what to do; the largest empty regions of the sphere
-  are found as the directions farthest from every reading and named in words ("the top of the
-  sphere (+Z) is empty");
+* warnings in plain language, each with what to do; the largest empty caps of the sphere
+  (found exactly, see :mod:`triaxcal._caps`) are named by their centre and radius ("no
+  reading within 41 deg of (-0.94, -0.26, -0.20), 19 deg from -X towards -Y");
 * for a magnetometer: the field the World Magnetic Model expects where it was calibrated
   (total, horizontal, inclination, declination) beside the strength the readings show, its
   alignment with the accelerometer (rotation, mounting, dip angle and its spread before and
@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from . import _options as opt
+from ._caps import largest_empty_caps
 from ._validate import as_points
 from .calibration import SensorCalibration
 from .coverage import Coverage, coverage_warning, sphere_cells
@@ -45,6 +47,7 @@ from .units import per_unit
 
 __all__ = [
     "QualityReport",
+    "cap_words",
     "context_lines",
     "coverage",
     "direction_words",
@@ -52,6 +55,7 @@ __all__ = [
     "have_matplotlib",
     "plot_report",
     "quality_report",
+    "report_figure",
 ]
 
 #: An empty cap of the sphere at least this wide (angular radius, degrees) is warned about.
@@ -89,43 +93,26 @@ def coverage(directions: Any) -> tuple[np.ndarray, float]:
     return cov.counts, cov.percent
 
 
-def _fibonacci(n: int) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    r = np.sqrt(1 - z * z)
-    phi = i * math.pi * (3 - math.sqrt(5))
-    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
-
-
 def empty_regions(
     directions: Any, *, min_deg: float = HOLE_DEG, max_regions: int = 3
 ) -> list[tuple[np.ndarray, float]]:
     """The largest empty caps of the sphere: ``[(centre unit vector, angular radius deg)]``.
 
-    The centre is the direction farthest (in angle) from every reading; the radius is that
-    angle. Further caps are searched away from the ones found. Only caps of at least
-    ``min_deg`` are returned, largest first.
+    The first is the largest cap that holds no reading (exact: its rim passes through three
+    readings); further caps are the largest centred more than 1.5 radii from the ones found.
+    Only caps of at least ``min_deg`` are returned, largest first.
+
+    >>> import numpy as np
+    >>> pts = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, -1.0]])
+    >>> [(c.round(3).tolist(), round(r, 3)) for c, r in empty_regions(pts, max_regions=1)]
+    [([0.0, 0.0, 1.0], 90.0)]
     """
-    u = _unit(as_points(directions, name="directions"))
-    cand = _fibonacci(4000)
-    # angular distance to the nearest reading, in chunks to bound memory
-    near = np.empty(len(cand))
-    for s in range(0, len(cand), 500):
-        dots = cand[s:s + 500] @ u.T
-        near[s:s + 500] = np.degrees(np.arccos(np.clip(dots.max(axis=1), -1, 1)))
-    out: list[tuple[np.ndarray, float]] = []
-    alive = np.ones(len(cand), dtype=bool)
-    for _ in range(max_regions):
-        if not alive.any():
-            break
-        i = int(np.argmax(np.where(alive, near, -1)))
-        ang = float(near[i])
-        if ang < min_deg:
-            break
-        out.append((cand[i].copy(), ang))
-        sep = np.degrees(np.arccos(np.clip(cand @ cand[i], -1, 1)))
-        alive &= sep > 1.5 * ang
-    return out
+    lo = opt.number(min_deg, "min_deg", ge=0, le=180, hint="degrees")
+    most = opt.integer(max_regions, "max_regions", ge=1, le=100)
+    pts = as_points(directions, name="directions")
+    if not np.isfinite(pts).all():
+        raise CalibrationError("directions contain NaN or inf; drop those readings first")
+    return largest_empty_caps(pts, min_deg=lo, max_regions=most)
 
 
 _AXIS_WORDS = {
@@ -157,6 +144,31 @@ def direction_words(v: Any) -> str:
     z = [s for k, s in names if k == 2]
     extra = f" ({_AXIS_WORDS[(2, z[0])]})" if z else ""
     return "between " + " and ".join(label) + extra
+
+
+def cap_words(centre: Any, radius_deg: float) -> str:
+    """Name an empty cap by its centre and radius, and say how far the centre is from the
+    nearest sensor axis.
+
+    >>> cap_words([-0.9435, -0.2647, -0.1992], 41.31)
+    'no reading within 41 deg of (-0.94, -0.26, -0.20), 19 deg from -X towards -Y'
+    >>> cap_words([0.0, 0.0, 1.0], 72.6)
+    'no reading within 73 deg of (+0.00, +0.00, +1.00), the +Z axis'
+    """
+    v = np.asarray(centre, dtype=float)
+    v = v / np.linalg.norm(v)
+    k = int(np.argmax(np.abs(v)))
+    axis = f"{'+' if v[k] > 0 else '-'}{'XYZ'[k]}"
+    off = math.degrees(math.acos(min(1.0, abs(float(v[k])))))
+    where = f"({v[0]:+.2f}, {v[1]:+.2f}, {v[2]:+.2f})"
+    if off < 1.0:
+        pos = f"the {axis} axis"
+    else:
+        rest = v.copy()
+        rest[k] = 0.0
+        j = int(np.argmax(np.abs(rest)))
+        pos = f"{off:.0f} deg from {axis} towards {'+' if v[j] > 0 else '-'}{'XYZ'[j]}"
+    return f"no reading within {radius_deg:.0f} deg of {where}, {pos}"
 
 
 def _axis_phrase(v: np.ndarray) -> str:
@@ -328,6 +340,16 @@ def quality_report(
     pts = as_points(points)
     part, fit = _resolve(cal)
     n = len(pts)
+    _check_sensor(sensor)
+    if model_reason is not None and not isinstance(model_reason, str):
+        raise CalibrationError(f"model_reason must be text or None, got {model_reason!r}")
+    if rejected is not None:
+        if isinstance(rejected, (str, bytes)) or not hasattr(rejected, "__iter__"):
+            raise CalibrationError(
+                f"rejected must be a sequence of reading indices, got {rejected!r}"
+            )
+        rejected = [opt.integer(i, "rejected index", ge=0, le=max(n - 1, 0))
+                    for i in rejected]
     if rejected is None:
         rej = part.stats.get("rejected") or []
         used = part.stats.get("n")
@@ -384,13 +406,24 @@ def quality_report(
         coverage_pct=cov.percent,
         cells_hit=cov.cells_hit,
         cells_total=cov.n_cells,
-        empty=[(c.tolist(), a, direction_words(c)) for c, a in holes],
+        empty=[(c.tolist(), a, cap_words(c, a)) for c, a in holes],
         rejected=rej,
         warnings=warnings,
         model_reason=model_reason or part.stats.get("model_reason"),
         intervals=intervals,
         extra={"context": context_lines(part)},
     )
+
+
+SENSORS = ("accel", "gyro", "mag")
+
+
+def _check_sensor(sensor: Any) -> None:
+    if sensor is not None and (not isinstance(sensor, str) or sensor not in SENSORS):
+        raise CalibrationError(
+            f"sensor must be None or one of {', '.join(repr(x) for x in SENSORS)}, got "
+            f"{sensor!r}"
+        )
 
 
 def context_lines(part: SensorCalibration) -> list[str]:
@@ -445,8 +478,8 @@ def _warnings(part: SensorCalibration, fit: Any, sensor: str | None, n: int, rej
     w: list[str] = []
     for c, ang in holes:
         w.append(
-            f"{direction_words(c)} of the sphere is empty (no reading within {ang:.0f} deg of "
-            f"it): {_hole_action(sensor, c)}, then fit again"
+            f"the sphere has an empty cap ({cap_words(c, ang)}): {_hole_action(sensor, c)}, "
+            "then fit again"
         )
     low = coverage_warning(cov, sensor)
     if low:
@@ -508,6 +541,33 @@ def _ellipse(part: SensorCalibration, radius: float, i: int, j: int) -> np.ndarr
     return v @ (circ / np.sqrt(w)[:, None]) + part.offset[idx][:, None]
 
 
+def _cap_outline(centre: np.ndarray, radius_deg: float) -> np.ndarray:
+    """The rim of a cap in the coverage map's (longitude deg, z) coordinates, (2, K), with
+    NaN where it wraps around at +-180 deg."""
+    c = centre / np.linalg.norm(centre)
+    a = np.array([1.0, 0.0, 0.0]) if abs(c[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(c, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(c, e1)
+    t = np.linspace(0, 2 * np.pi, 361)
+    rr = math.radians(radius_deg)
+    pts = (math.cos(rr) * c[None] + math.sin(rr) * (np.cos(t)[:, None] * e1
+                                                      + np.sin(t)[:, None] * e2))
+    lon = np.degrees(np.arctan2(pts[:, 1], pts[:, 0]))
+    z = pts[:, 2].copy()
+    jump = np.flatnonzero(np.abs(np.diff(lon)) > 180) + 1
+    lon = np.insert(lon, jump, np.nan)
+    z = np.insert(z, jump, np.nan)
+    return np.vstack([lon, z])
+
+
+def _empty_legend() -> Any:
+    from matplotlib.lines import Line2D
+
+    return Line2D([], [], color="#d62728", ls="--", marker="*", mec="k", ms=10,
+                  label="largest empty cap (rim)")
+
+
 def plot_report(
     points: Any,
     cal: Any,
@@ -534,11 +594,47 @@ def plot_report(
         raise CalibrationError(
             "the report figure needs matplotlib: pip install 'triaxcal[plot]' (or matplotlib)"
         )
+    dots = opt.integer(dpi, "dpi", ge=20, le=600, hint="dots per inch of the PNG")
+    fig = report_figure(points, cal, report=report, sensor=sensor, title=title, dpi=dots)
+    out = Path(path)
+    fig.savefig(out, format="png", dpi=dots)
+    return out
+
+
+def report_figure(
+    points: Any,
+    cal: Any,
+    *,
+    report: QualityReport | None = None,
+    sensor: str | None = None,
+    title: str | None = None,
+    dpi: int = 80,
+) -> Any:
+    """The report figure of :func:`plot_report` as a matplotlib ``Figure`` (not saved).
+
+    Raises
+    ------
+    CalibrationError
+        If matplotlib (the ``plot`` extra) is not installed.
+    """
+    if not have_matplotlib():
+        raise CalibrationError(
+            "the report figure needs matplotlib: pip install 'triaxcal[plot]' (or matplotlib)"
+        )
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
+    dpi = opt.integer(dpi, "dpi", ge=20, le=600, hint="dots per inch of the PNG")
+    _check_sensor(sensor)
+    if title is not None and not isinstance(title, str):
+        raise CalibrationError(f"title must be text or None, got {title!r}")
+    if report is not None and not isinstance(report, QualityReport):
+        raise CalibrationError(
+            f"report must be a QualityReport (triaxcal.quality_report) or None, got "
+            f"{type(report).__name__}"
+        )
     pts = as_points(points)
     part, _ = _resolve(cal)
     rep = report if report is not None else quality_report(pts, cal, sensor=sensor)
@@ -551,6 +647,8 @@ def plot_report(
     u, ru = part.unit, part.raw_unit
 
     fig = Figure(figsize=(13, 12.5), dpi=dpi, layout="constrained")
+    engine: Any = fig.get_layout_engine()
+    engine.set(wspace=0.06)  # room between the colour bar and the next panel
     gs = fig.add_gridspec(3, 3)
     name = rep.sensor or sensor or "sensor"
     fig.suptitle(
@@ -598,7 +696,9 @@ def plot_report(
             fig.legend(handles[0] + h2[0][-1:], handles[1] + h2[1][-1:],
                        loc="outside lower center", ncol=5, fontsize=10, frameon=False)
 
-    # residual histogram
+    # residual histogram: at most 5 ticks, the common power of ten written once at the axis end
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
     ax = fig.add_subplot(gs[2, 0])
     res_in = norms[keep] - r
     bins = np.histogram_bin_edges(norms - r, bins=40).tolist()
@@ -606,6 +706,11 @@ def plot_report(
     if (~keep).any():
         ax.hist(norms[~keep] - r, bins=bins, color="#d62728", alpha=0.8, label="rejected")
     ax.axvline(0, color="k", lw=0.8)
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=5, symmetric=True))
+    fmt = ScalarFormatter(useMathText=True)
+    fmt.set_powerlimits((-2, 3))
+    ax.xaxis.set_major_formatter(fmt)
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(f"residual |calibrated| - radius ({u})")
     ax.set_ylabel("readings")
     ax.set_title(f"residuals: RMS {rep.rms:.3g} {u}, std/mean of |v| "
@@ -618,25 +723,40 @@ def plot_report(
     cu = _unit(c)  # every reading, as the coverage number
     counts, _ = coverage(cu)
     import matplotlib.colors as mcolors
-    from matplotlib.patches import Rectangle
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.patches import Patch, Rectangle
 
     cmap = matplotlib.colormaps["viridis"]
-    cnorm = mcolors.Normalize(vmin=0, vmax=max(float(np.log1p(counts.max())), 1.0))
+    top = int(counts.max()) if counts.size else 1
+    cnorm = mcolors.Normalize(vmin=math.log1p(1), vmax=max(math.log1p(top), math.log1p(2)))
     for n_hits, (lo, hi, z_lo, z_hi) in zip(counts.tolist(), sphere_cells().rectangles()):
         face = "#d9d9d9" if n_hits == 0 else cmap(cnorm(math.log1p(n_hits)))
         for shift in (0.0, -360.0):  # a cell that runs past +180 deg shows on both edges
             ax.add_patch(Rectangle((lo + shift, z_lo), hi - lo, z_hi - z_lo, facecolor=face,
                                    edgecolor="white", linewidth=0.6))
+    ticks = [t for t in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
+             if t <= max(top, 1)]
+    cbar = fig.colorbar(ScalarMappable(norm=cnorm, cmap=cmap), ax=ax,
+                        ticks=[math.log1p(t) for t in ticks], pad=0.02, fraction=0.06)
+    cbar.ax.set_yticklabels([str(t) for t in ticks])
+    cbar.set_label("readings per cell")
     ax.scatter(np.degrees(np.arctan2(cu[:, 1], cu[:, 0])), cu[:, 2], s=4, c="k", alpha=0.5)
-    for cen, _ang, words in rep.empty:
-        lon = float(np.degrees(np.arctan2(cen[1], cen[0])))
-        ax.plot(lon, cen[2], marker="*", ms=18, color="#d62728", mec="k", ls="none",
+    for cen, ang, _words in rep.empty:
+        cv = np.asarray(cen, dtype=float)
+        lon = float(np.degrees(np.arctan2(cv[1], cv[0])))
+        ax.plot(lon, cv[2], marker="*", ms=16, color="#d62728", mec="k", ls="none",
                 clip_on=False)
-        ax.annotate(f"empty: {words}", (lon, cen[2]), textcoords="offset points",
-                    xytext=(-8 if lon > 60 else 8, 8), ha="right" if lon > 60 else "left",
-                    fontsize=9, color="#d62728",
+        rim = _cap_outline(cv, ang)
+        ax.plot(rim[0], rim[1], color="#d62728", lw=1.4, ls="--")
+        ax.annotate(f"empty cap, radius {ang:.0f} deg", (lon, cv[2]),
+                    textcoords="offset points", xytext=(-8 if lon > 60 else 8, 8),
+                    ha="right" if lon > 60 else "left", fontsize=9, color="#d62728",
                     bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#d62728",
                           "alpha": 0.9})
+    keys: list[Any] = [Patch(facecolor="#d9d9d9", edgecolor="white", label="no reading")]
+    if rep.empty:
+        keys.append(_empty_legend())
+    ax.legend(handles=keys, loc="lower left", fontsize=8, framealpha=0.9)
     ax.set_xlim(-180, 180)
     ax.set_ylim(-1, 1)
     ax.set_xticks([-180, -90, 0, 90, 180])
@@ -646,7 +766,7 @@ def plot_report(
     ax.set_xlabel("longitude (direction in the XY plane)")
     ax.set_ylabel("z component (equal-area)")
     ax.set_title(f"coverage {rep.coverage_pct:.0f} % ({rep.cells_hit}/{rep.cells_total} "
-                 "cells; grey = empty)")
+                 "equal-area cells)")
 
     # norms over time
     ax = fig.add_subplot(gs[2, 2])
@@ -661,6 +781,4 @@ def plot_report(
     ax.set_title("|calibrated| per reading (x: rejected)")
     ax.grid(alpha=0.3)
 
-    out = Path(path)
-    fig.savefig(out, format="png", dpi=dpi)
-    return out
+    return fig
