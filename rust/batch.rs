@@ -21,6 +21,7 @@ use rayon::prelude::*;
 pub fn fit_batch(sets: &[&[[f64; 3]]], opts: &FitOptions) -> Vec<Result<EllipsoidFit>> {
     let inner = FitOptions {
         parallel: false,
+        diagnostics: false,
         ..*opts
     };
     sets.par_iter()

@@ -26,8 +26,9 @@ pub const WARN_MIN_SPREAD: f64 = 0.1;
 
 /// Checks the gains of a fit; `model` names it in the message.
 pub fn check_axis_ratio(w: &Matrix3<f64>, model: &str) -> Result<(), CalError> {
-    let e = SymmetricEigen::new(*w).eigenvalues.map(f64::abs);
-    let ratio = e.max() / e.min();
+    let e = crate::geometry::sym3_eigenvalues(w).map(f64::abs);
+    let ratio =
+        e.iter().cloned().fold(0.0, f64::max) / e.iter().cloned().fold(f64::INFINITY, f64::min);
     if !(ratio <= MAX_AXIS_RATIO) {
         return Err(CalError::Degenerate {
             why: format!(

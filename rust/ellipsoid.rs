@@ -18,14 +18,30 @@
 //! | `Axis`   | offset, 3 gains             | `diag(g)`               |
 //! | `Full`   | offset, symmetric 3x3 `W`   | `[[d,e,f],[e,d',g],..]` |
 //!
+//! Any parameter can be held at a given value instead (`FitOptions::fixed`): the seed's
+//! spreadsheet fits the offsets and two gains with the third gain fixed at 1, and a sphere of
+//! known radius needs only its centre. The fewest readings a model takes is its number of free
+//! unknowns: with exactly that many the solve is exactly determined (no residual is left to
+//! estimate the noise or the standard errors from, and the fit says so).
+//!
 //! The residual of a point is `‖W (p - offset)‖ - R`, the geometric error along the field
 //! direction. Internally the fit works on normalised coordinates `q = (p - mean) / scale` with
-//! `R = 1`; results are mapped back at the end. It starts from an algebraic fit (the
-//! least-squares quadric, i.e. the smallest eigenvector of the design scatter matrix, itself
-//! started from the linear sphere fit where the quadric is no ellipsoid), then refines with
-//! Levenberg-Marquardt. Each iteration is one streaming pass that accumulates `JᵀJ`, `Jᵀr` and
-//! the cost: extra memory does not grow with the number of points. Large inputs are first
-//! solved on an evenly strided subsample, then refined on all points.
+//! `R = 1`; results are mapped back at the end (readings beyond 2^±400 in magnitude are first
+//! rescaled by a power of two, which is exact, so that no square overflows or underflows). It
+//! starts from an algebraic fit (the least-squares quadric, i.e. the smallest eigenvector of
+//! the design scatter matrix, itself started from the linear sphere fit where the quadric is no
+//! ellipsoid), then refines with Levenberg-Marquardt. Each iteration is one streaming pass that
+//! accumulates `JᵀJ`, `Jᵀr` and the cost (`kernel`): extra memory does not grow with the
+//! number of points.
+//!
+//! Large inputs are solved first on a subsample of [`SUBSAMPLE_SIZE`] points, one drawn at a
+//! fixed pseudo-random place in each of that many equal blocks of the input (so that no period
+//! or ordering of the data can make it unrepresentative), then polished on all points by
+//! Gauss-Newton steps that reuse the subsample's `JᵀJ` (scaled to the full size) and need only
+//! `Jᵀr` from each pass; the last pass accumulates the full `JᵀJ` for the standard errors, the
+//! residual statistics and the coverage of the sphere. The answer is the minimum over all
+//! points, so it does not depend on their order beyond round-off (passes that stop contracting
+//! fall back to Levenberg-Marquardt on all points).
 //!
 //! Noise biases every length-based fit by O(σ²) (σ² the variance of raw noise per axis): a
 //! noisy vector is longer on average, `E‖W(p - offset)‖ ≈ R + σ²(tr W² - ûᵀW²û)/(2R)`, and
@@ -33,24 +49,27 @@
 //! variables: `Cov(J, r)` along the scale direction is the radial variance `σ²ûᵀW²û`). The
 //! plain geometric fit therefore shrinks `W` by about `2σ²/R²`. With `debias` (the default)
 //! the residual is `‖W(p - offset)‖ - R - σ²(tr W² + ûᵀW²û)/(2R)`, which zeroes both terms to
-//! first order; `σ²` comes from the residuals (`Var r ≈ σ² ûᵀW²û`) in two outer rounds. The
-//! correction is skipped when the bias is below a tenth of the statistical error (σ < 0.1/√N
-//! relative to the radius: 0.7 % for 200 points, 0.03 % for 10⁵), where it cannot matter. At 5 %
-//! noise this cuts the matrix error at large N by 5-8x and makes the fit clearly more accurate
-//! than the algebraic one; `debias = false` gives the plain geometric least-squares fit.
+//! first order; `σ²` comes from the residuals (`Var r ≈ σ² ûᵀW²û`) of the same pass, as the
+//! fixed point `σ² = Σ r² / Σ ûᵀW²û`. The correction is skipped when the bias is below a tenth
+//! of the statistical error (σ < 0.1/√N relative to the radius: 0.7 % for 200 points, 0.03 %
+//! for 10⁵), where it cannot matter. At 5 % noise this cuts the matrix error at large N by
+//! 5-8x and makes the fit clearly more accurate than the algebraic one; `debias = false` gives
+//! the plain geometric least-squares fit (the seed's objective).
 
+use crate::algebraic::{self, Norm};
 use crate::bounds;
-use crate::error::{check_finite, check_positive, CalError, Result};
-use crate::geometry::{check_three_dimensional, Spread};
-use crate::simd;
-use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
+use crate::error::{check_positive, CalError, Result};
+use crate::geometry::{self, Spread};
+use crate::kernel::{self, Setup, Sums, Want};
+use nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 
-const CHUNK: usize = 8192;
-/// Inputs with more points than this are first solved on a strided subsample.
-const SUBSAMPLE_ABOVE: usize = 60_000;
+/// Inputs with more points than this are first solved on a subsample.
+pub const SUBSAMPLE_ABOVE: usize = 60_000;
 /// Size of that subsample.
-const SUBSAMPLE_SIZE: usize = 20_000;
+pub const SUBSAMPLE_SIZE: usize = 20_000;
+/// Most polishing passes over all points before falling back to Levenberg-Marquardt.
+const MAX_POLISH: usize = 8;
 
 /// Which parameters are fitted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -84,6 +103,14 @@ impl Model {
             Model::Full => "full",
         }
     }
+    /// The model's name in quotes followed by "model", for messages.
+    fn label(self) -> &'static str {
+        match self {
+            Model::Sphere => "\"sphere\" model",
+            Model::Axis => "\"axis\" model",
+            Model::Full => "\"full\" model",
+        }
+    }
     /// Number of unknowns.
     pub fn nparams(self) -> usize {
         match self {
@@ -99,20 +126,24 @@ impl Model {
             Model::Axis => &[
                 "offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
             ],
-            Model::Full => &[
-                "offset_x",
-                "offset_y",
-                "offset_z",
-                "diag_x",
-                "diag_y",
-                "diag_z",
-                "offdiag_xy",
-                "offdiag_xz",
-                "offdiag_yz",
-            ],
+            Model::Full => &FIXABLE,
         }
     }
 }
+
+/// Names of the entries of [`FitOptions::fixed`], in order. For the sphere model entry 3 is its
+/// one gain (`W = gain I`); entries past the model's parameters must be `None`.
+pub const FIXABLE: [&str; 9] = [
+    "offset_x",
+    "offset_y",
+    "offset_z",
+    "diag_x",
+    "diag_y",
+    "diag_z",
+    "offdiag_xy",
+    "offdiag_xz",
+    "offdiag_yz",
+];
 
 /// How the parameters are refined.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -148,7 +179,7 @@ pub struct FitOptions {
     /// Magnitude calibrated readings must have (1.0 for g, 9.80665 for m/s², the local field in
     /// µT); `None` keeps the data's own scale (`det W = 1`).
     pub radius: Option<f64>,
-    /// Most iterations (trial steps) of the refinement.
+    /// Most iterations (trial steps and polishing passes) of the refinement.
     pub max_iter: usize,
     /// Converged when an accepted step lowers the cost by less than this fraction.
     pub tol: f64,
@@ -159,9 +190,13 @@ pub struct FitOptions {
     /// Correct the geometric residual for the bias that noise adds to vector lengths (see
     /// the module documentation). Off: the plain geometric least-squares fit.
     pub debias: bool,
-    /// Compute the coverage warnings (one more pass over the points). Batches, which report
-    /// no warnings, turn it off.
+    /// Compute the coverage of the sphere and the plain-language warnings. Batches, which
+    /// report no warnings, turn it off.
     pub diagnostics: bool,
+    /// Parameters held at these values instead of fitted, named by [`FIXABLE`]: offsets in raw
+    /// units, gains (`diag`, `offdiag`, the sphere's gain) in calibrated units per raw unit,
+    /// which needs `radius`.
+    pub fixed: [Option<f64>; 9],
 }
 
 impl Default for FitOptions {
@@ -175,6 +210,7 @@ impl Default for FitOptions {
             parallel: true,
             debias: true,
             diagnostics: true,
+            fixed: [None; 9],
         }
     }
 }
@@ -193,9 +229,10 @@ pub struct EllipsoidFit {
     /// RMS of `‖calibrated‖ - radius`, in calibrated units.
     pub rms: f64,
     /// Standard errors of the parameters named by [`Model::param_names`] (offset in raw units,
-    /// matrix terms in calibrated units per raw unit, `data_radius` in raw units).
+    /// matrix terms in calibrated units per raw unit, `data_radius` in raw units); 0 for a
+    /// fixed parameter, NaN for all when the solve is exactly determined.
     pub stderr: Vec<f64>,
-    /// Trial steps taken by the refinement (0 for the algebraic method).
+    /// Trial steps and polishing passes taken by the refinement (0 for the algebraic method).
     pub iterations: usize,
     /// Whether the refinement met its tolerance.
     pub converged: bool,
@@ -203,7 +240,7 @@ pub struct EllipsoidFit {
     pub condition: f64,
     /// Number of points.
     pub n: usize,
-    /// Plain-language warnings (poor coverage, no convergence).
+    /// Plain-language warnings and notes (poor coverage, no convergence, exactly determined).
     pub warnings: Vec<String>,
 }
 
@@ -213,550 +250,136 @@ pub struct EllipsoidFit {
 //   Axis:   [offset_x, offset_y, offset_z, diag_x, diag_y, diag_z]
 //   Full:   [offset_x, offset_y, offset_z, diag_x, diag_y, diag_z, offdiag_xy, offdiag_xz, offdiag_yz]
 
-fn w_of(model: Model, th: &[f64]) -> Matrix3<f64> {
-    match model {
-        Model::Sphere => Matrix3::identity() * th[3],
-        Model::Axis => Matrix3::from_diagonal(&Vector3::new(th[3], th[4], th[5])),
-        Model::Full => Matrix3::new(
+fn w_of(th: &[f64]) -> Matrix3<f64> {
+    match th.len() {
+        4 => Matrix3::identity() * th[3],
+        6 => Matrix3::from_diagonal(&Vector3::new(th[3], th[4], th[5])),
+        _ => Matrix3::new(
             th[3], th[6], th[7], th[6], th[4], th[8], th[7], th[8], th[5],
         ),
     }
 }
 
-fn theta_of(model: Model, o: Vector3<f64>, w: &Matrix3<f64>) -> Vec<f64> {
-    let mut th = vec![o.x, o.y, o.z];
-    match model {
-        Model::Sphere => th.push(w.trace() / 3.0),
-        Model::Axis => th.extend([w[(0, 0)], w[(1, 1)], w[(2, 2)]]),
-        Model::Full => th.extend([
-            w[(0, 0)],
-            w[(1, 1)],
-            w[(2, 2)],
-            w[(0, 1)],
-            w[(0, 2)],
-            w[(1, 2)],
-        ]),
+fn theta_of<const P: usize>(o: Vector3<f64>, w: &Matrix3<f64>) -> [f64; P] {
+    let mut th = [0.0; P];
+    th[0] = o.x;
+    th[1] = o.y;
+    th[2] = o.z;
+    match P {
+        4 => th[3] = w.trace() / 3.0,
+        6 => {
+            for a in 0..3 {
+                th[3 + a] = w[(a, a)];
+            }
+        }
+        _ => {
+            for a in 0..3 {
+                th[3 + a] = w[(a, a)];
+            }
+            th[6] = w[(0, 1)];
+            th[7] = w[(0, 2)];
+            th[8] = w[(1, 2)];
+        }
     }
     th
 }
 
-/// Normalisation of coordinates: `q = (p - mean) * inv_scale`.
-#[derive(Clone, Copy)]
-struct Norm {
-    mean: Vector3<f64>,
-    inv_scale: f64,
-}
-
-impl Norm {
-    #[inline(always)]
-    fn q(&self, p: &[f64; 3]) -> Vector3<f64> {
-        (Vector3::new(p[0], p[1], p[2]) - self.mean) * self.inv_scale
+fn setup(norm: Norm, th: &[f64]) -> Setup {
+    let w = w_of(th);
+    Setup {
+        mean: [norm.mean.x, norm.mean.y, norm.mean.z],
+        inv_scale: norm.inv_scale,
+        offset: [th[0], th[1], th[2]],
+        w: [
+            [w[(0, 0)], w[(0, 1)], w[(0, 2)]],
+            [w[(1, 0)], w[(1, 1)], w[(1, 2)]],
+            [w[(2, 0)], w[(2, 1)], w[(2, 2)]],
+        ],
+        trw2: (w * w).trace(),
     }
 }
 
-/// Sums over the points for one parameter vector: `JᵀJ` (upper triangle), `Jᵀr`, `Σ r²`.
-#[derive(Clone)]
-struct Acc<const P: usize> {
-    jtj: [[f64; P]; P],
-    jtr: [f64; P],
-    cost: f64,
-    /// Σ ûᵀW²û over the points: the noise variance estimate is `cost / wq`.
-    wq: f64,
+fn full_matrix<const P: usize>(jtj: &[[f64; P]; P]) -> SMatrix<f64, P, P> {
+    SMatrix::<f64, P, P>::from_fn(|i, j| if i <= j { jtj[i][j] } else { jtj[j][i] })
 }
 
-impl<const P: usize> Acc<P> {
-    fn zero() -> Self {
-        Acc {
-            jtj: [[0.0; P]; P],
-            jtr: [0.0; P],
-            cost: 0.0,
-            wq: 0.0,
+/// Solves `(JᵀJ + λ diag JᵀJ) δ = -Jᵀr` for the free parameters (`δ = 0` for fixed ones).
+fn solve<const P: usize>(
+    jtj: &SMatrix<f64, P, P>,
+    jtr: &[f64; P],
+    lambda: f64,
+    free: &[bool; P],
+) -> Option<SVector<f64, P>> {
+    let mut a = *jtj;
+    let mut g = SVector::<f64, P>::from_fn(|i, _| -jtr[i]);
+    for i in 0..P {
+        if free[i] {
+            a[(i, i)] += lambda * jtj[(i, i)].max(1e-12);
+        } else {
+            for j in 0..P {
+                a[(i, j)] = 0.0;
+                a[(j, i)] = 0.0;
+            }
+            a[(i, i)] = 1.0;
+            g[i] = 0.0;
         }
     }
-    fn add(mut self, o: Self) -> Self {
-        for i in 0..P {
-            for j in i..P {
-                self.jtj[i][j] += o.jtj[i][j];
-            }
-            self.jtr[i] += o.jtr[i];
-        }
-        self.cost += o.cost;
-        self.wq += o.wq;
-        self
+    a.cholesky().map(|c| c.solve(&g))
+}
+
+/// The noise term `h = σ²/2` of the debiased residual: the fixed point `h = Σ(r₀ - h c)² /
+/// (2 Σ ûᵀW²û)` of one pass's sums (the estimate hardly depends on `h`: a few steps suffice).
+fn half_sigma2<const P: usize>(a: &Sums<P>) -> f64 {
+    let wq = a.wq.max(f64::MIN_POSITIVE);
+    let mut h = 0.5 * a.r0r0 / wq;
+    for _ in 0..4 {
+        h = 0.5 * a.cost(h) / wq;
     }
-}
-
-/// Points processed together in the per-point loops: lane-wise arrays that LLVM vectorises.
-const LANES: usize = 4;
-
-/// Calls `f(q, wt)` for every `stride`-th point in groups of [`LANES`], with `q[k][l]` the
-/// normalised coordinate `k` of lane `l` and `wt[l]` 1 for a real point, 0 for padding (padded
-/// lanes repeat coordinate 0, so they stay finite).
-#[inline(always)]
-fn for_lanes(
-    points: &[[f64; 3]],
-    stride: usize,
-    norm: Norm,
-    mut f: impl FnMut(&[[f64; LANES]; 3], &[f64; LANES]),
-) {
-    let mut it = points.iter().step_by(stride);
-    loop {
-        let mut q = [[0.0f64; LANES]; 3];
-        let mut wt = [0.0f64; LANES];
-        let mut got = 0;
-        while got < LANES {
-            match it.next() {
-                Some(p) => {
-                    let v = norm.q(p);
-                    for k in 0..3 {
-                        q[k][got] = v[k];
-                    }
-                    wt[got] = 1.0;
-                    got += 1;
-                }
-                None => break,
-            }
-        }
-        if got == 0 {
-            break;
-        }
-        f(&q, &wt);
-        if got < LANES {
-            break;
-        }
-    }
-}
-
-/// Sums over the points of `Jᵀ J`, `Jᵀ r`, `Σ r²` and `Σ ûᵀW²û` at the parameters `th`, for
-/// every `stride`-th point (normalised coordinates, unit radius).
-///
-/// Per point, with `u = q - offset`, `v = W u`, `n = ‖v‖`:
-/// `r = n - 1 - (σ²/2)(tr W² + ûᵀW²û)` (the noise-bias term only when `half_sigma2 > 0`;
-/// it is not differentiated), and the Jacobian row, labelled by parameter:
-/// - `offset_*`: `-(W v)ᵀ / n` (W symmetric)
-/// - `k` (Sphere): `v·u / n`
-/// - `diag_a`: `v_a u_a / n`
-/// - `offdiag_ab`: `(v_a u_b + v_b u_a) / n`
-///
-/// Points go through in groups of [`LANES`] with structure-of-arrays temporaries and per-lane
-/// accumulators, which the compiler turns into SIMD arithmetic.
-fn accumulate<const P: usize>(
-    points: &[[f64; 3]],
-    stride: usize,
-    norm: Norm,
-    model: Model,
-    th: &[f64],
-    parallel: bool,
-    half_sigma2: f64,
-) -> Acc<P> {
-    let w = w_of(model, th);
-    let o = [th[0], th[1], th[2]];
-    let trw2 = (w * w).trace();
-    let wm = [
-        [w[(0, 0)], w[(0, 1)], w[(0, 2)]],
-        [w[(1, 0)], w[(1, 1)], w[(1, 2)]],
-        [w[(2, 0)], w[(2, 1)], w[(2, 2)]],
-    ];
-    let chunk = CHUNK * stride;
-    let k = Kernel {
-        stride,
-        norm,
-        model,
-        wm,
-        o,
-        trw2,
-        half_sigma2,
-    };
-    if parallel && points.len() / stride >= 2 * CHUNK {
-        points
-            .par_chunks(chunk)
-            .map(|c| accumulate_chunk_dispatch::<P>(c, &k))
-            .reduce(Acc::zero, Acc::add)
-    } else {
-        accumulate_chunk_dispatch::<P>(points, &k)
-    }
-}
-
-/// The fixed inputs of one accumulation pass.
-#[derive(Clone, Copy)]
-struct Kernel {
-    stride: usize,
-    norm: Norm,
-    model: Model,
-    wm: [[f64; 3]; 3],
-    o: [f64; 3],
-    trw2: f64,
-    half_sigma2: f64,
-}
-
-fn accumulate_chunk_dispatch<const P: usize>(chunk: &[[f64; 3]], k: &Kernel) -> Acc<P> {
-    #[cfg(target_arch = "x86_64")]
-    if simd::has_avx2_fma() {
-        return simd::avx2_call!(accumulate_chunk_avx2::<P>(chunk, k));
-    }
-    accumulate_chunk::<P>(chunk, k)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn accumulate_chunk_avx2<const P: usize>(chunk: &[[f64; 3]], k: &Kernel) -> Acc<P> {
-    accumulate_chunk::<P>(chunk, k)
-}
-
-#[inline(always)]
-fn accumulate_chunk<const P: usize>(chunk: &[[f64; 3]], k: &Kernel) -> Acc<P> {
-    let Kernel {
-        stride,
-        norm,
-        model,
-        wm,
-        o,
-        trw2,
-        half_sigma2,
-    } = *k;
-    let mut jtj = [[[0.0f64; LANES]; P]; P];
-    let mut jtr = [[0.0f64; LANES]; P];
-    let mut cost = [0.0f64; LANES];
-    let mut wqs = [0.0f64; LANES];
-    for_lanes(
-        chunk,
-        stride,
-        norm,
-        #[inline(always)]
-        |q, wt| {
-            let mut u = [[0.0f64; LANES]; 3];
-            for k in 0..3 {
-                for l in 0..LANES {
-                    u[k][l] = q[k][l] - o[k];
-                }
-            }
-            let mut v = [[0.0f64; LANES]; 3];
-            for i in 0..3 {
-                for l in 0..LANES {
-                    v[i][l] = wm[i][0] * u[0][l] + wm[i][1] * u[1][l] + wm[i][2] * u[2][l];
-                }
-            }
-            let mut wv = [[0.0f64; LANES]; 3];
-            for i in 0..3 {
-                for l in 0..LANES {
-                    wv[i][l] = wm[i][0] * v[0][l] + wm[i][1] * v[1][l] + wm[i][2] * v[2][l];
-                }
-            }
-            let mut r = [0.0f64; LANES];
-            let mut inv = [0.0f64; LANES];
-            for l in 0..LANES {
-                let n = (v[0][l] * v[0][l] + v[1][l] * v[1][l] + v[2][l] * v[2][l]).sqrt();
-                let iv = if n > 0.0 { 1.0 / n } else { 0.0 };
-                let wq =
-                    (wv[0][l] * wv[0][l] + wv[1][l] * wv[1][l] + wv[2][l] * wv[2][l]) * iv * iv;
-                r[l] = (n - 1.0 - half_sigma2 * (trw2 + wq)) * wt[l];
-                inv[l] = iv * wt[l];
-                wqs[l] += wq * wt[l];
-                cost[l] += r[l] * r[l];
-            }
-            let mut j = [[0.0f64; LANES]; P];
-            for l in 0..LANES {
-                j[0][l] = -wv[0][l] * inv[l]; // offset_x
-                j[1][l] = -wv[1][l] * inv[l]; // offset_y
-                j[2][l] = -wv[2][l] * inv[l]; // offset_z
-            }
-            match model {
-                Model::Sphere => {
-                    for l in 0..LANES {
-                        // k
-                        j[3][l] =
-                            (v[0][l] * u[0][l] + v[1][l] * u[1][l] + v[2][l] * u[2][l]) * inv[l];
-                    }
-                }
-                Model::Axis | Model::Full => {
-                    for a in 0..3 {
-                        for l in 0..LANES {
-                            j[3 + a][l] = v[a][l] * u[a][l] * inv[l]; // diag_x, diag_y, diag_z
-                        }
-                    }
-                    if P == 9 {
-                        for l in 0..LANES {
-                            j[6][l] = (v[0][l] * u[1][l] + v[1][l] * u[0][l]) * inv[l]; // offdiag_xy
-                            j[7][l] = (v[0][l] * u[2][l] + v[2][l] * u[0][l]) * inv[l]; // offdiag_xz
-                            j[8][l] = (v[1][l] * u[2][l] + v[2][l] * u[1][l]) * inv[l];
-                            // offdiag_yz
-                        }
-                    }
-                }
-            }
-            for a in 0..P {
-                for l in 0..LANES {
-                    jtr[a][l] += j[a][l] * r[l];
-                }
-                for b in a..P {
-                    for l in 0..LANES {
-                        jtj[a][b][l] += j[a][l] * j[b][l];
-                    }
-                }
-            }
-        },
-    );
-    let mut acc = Acc::<P>::zero();
-    for a in 0..P {
-        acc.jtr[a] = jtr[a].iter().sum();
-        for b in a..P {
-            acc.jtj[a][b] = jtj[a][b].iter().sum();
-        }
-    }
-    acc.cost = cost.iter().sum();
-    acc.wq = wqs.iter().sum();
-    acc
-}
-
-fn full_matrix<const P: usize>(acc: &Acc<P>) -> SMatrix<f64, P, P> {
-    SMatrix::<f64, P, P>::from_fn(|i, j| if i <= j { acc.jtj[i][j] } else { acc.jtj[j][i] })
-}
-
-// ----------------------------------------------------------------------------------------
-// starting points
-
-/// Linear sphere fit on normalised coordinates (see `sphere::fit_sphere_linear`).
-fn sphere_start(points: &[[f64; 3]], stride: usize, norm: Norm) -> Option<(Vector3<f64>, f64)> {
-    let mut ata = nalgebra::Matrix4::<f64>::zeros();
-    let mut atb = nalgebra::Vector4::<f64>::zeros();
-    for p in points.iter().step_by(stride) {
-        let q = norm.q(p);
-        let r = nalgebra::Vector4::new(2.0 * q.x, 2.0 * q.y, 2.0 * q.z, 1.0);
-        ata += r * r.transpose();
-        atb += r * q.norm_squared();
-    }
-    let sol = ata.cholesky()?.solve(&atb);
-    let c = Vector3::new(sol[0], sol[1], sol[2]);
-    let r2 = sol[3] + c.norm_squared();
-    (r2 > 0.0 && r2.is_finite()).then(|| (c, r2.sqrt()))
-}
-
-/// Algebraic quadric fit: the smallest eigenvector of the scatter matrix of the design rows
-/// `[x², y², z², 2xy, 2xz, 2yz, 2x, 2y, 2z, 1]` (cross terms dropped for `Axis`), converted to
-/// `(offset, W)` with unit radius. `None` when the quadric is not an ellipsoid.
-fn algebraic_start(
-    points: &[[f64; 3]],
-    stride: usize,
-    norm: Norm,
-    model: Model,
-) -> Option<(Vector3<f64>, Matrix3<f64>)> {
-    if model == Model::Full {
-        let v = smallest_eigenvector::<10>(points, stride, norm, |x, y, z| {
-            [
-                x * x,
-                y * y,
-                z * z,
-                2.0 * x * y,
-                2.0 * x * z,
-                2.0 * y * z,
-                2.0 * x,
-                2.0 * y,
-                2.0 * z,
-                1.0,
-            ]
-        })?;
-        let mq = Matrix3::new(v[0], v[3], v[4], v[3], v[1], v[5], v[4], v[5], v[2]);
-        quadric_to_ellipsoid(mq, Vector3::new(v[6], v[7], v[8]), v[9])
-    } else {
-        let v = smallest_eigenvector::<7>(points, stride, norm, |x, y, z| {
-            [x * x, y * y, z * z, 2.0 * x, 2.0 * y, 2.0 * z, 1.0]
-        })?;
-        let mq = Matrix3::from_diagonal(&Vector3::new(v[0], v[1], v[2]));
-        quadric_to_ellipsoid(mq, Vector3::new(v[3], v[4], v[5]), v[6])
-    }
-}
-
-/// `qᵀ M q + 2 bᵀ q + c = 0` to `(offset, W)` with `‖W (q - offset)‖ = 1`.
-fn quadric_to_ellipsoid(
-    mq: Matrix3<f64>,
-    b: Vector3<f64>,
-    c: f64,
-) -> Option<(Vector3<f64>, Matrix3<f64>)> {
-    // make the quadratic part positive (the eigenvector's sign is arbitrary)
-    let (mq, b, c) = if mq.trace() < 0.0 {
-        (-mq, -b, -c)
-    } else {
-        (mq, b, c)
-    };
-    let o = mq.try_inverse()? * (-b);
-    let k = o.dot(&(mq * o)) - c;
-    if !(k > 0.0) {
-        return None;
-    }
-    let e = SymmetricEigen::new(mq / k);
-    if e.eigenvalues.iter().any(|&l| !(l > 0.0) || !l.is_finite()) {
-        return None;
-    }
-    let sq = Matrix3::from_diagonal(&e.eigenvalues.map(f64::sqrt));
-    Some((o, e.eigenvectors * sq * e.eigenvectors.transpose()))
-}
-
-/// Smallest eigenvector of `Σ d dᵀ` over the design rows `d = row(q)`: one pass to accumulate
-/// (upper triangle, fixed-size arrays), then inverse iteration on the shifted Cholesky factor,
-/// seeded with the sphere through the same moments. The last entry of a row must be 1 and its
-/// first three must be x², y², z², followed (from `M - 4`) by 2x, 2y, 2z.
-fn smallest_eigenvector<const M: usize>(
-    points: &[[f64; 3]],
-    stride: usize,
-    norm: Norm,
-    row: impl Fn(f64, f64, f64) -> [f64; M],
-) -> Option<SVector<f64, M>> {
-    #[cfg(target_arch = "x86_64")]
-    let acc = if simd::has_avx2_fma() {
-        simd::avx2_call!(design_scatter_avx2::<M>(points, stride, norm, &row))
-    } else {
-        design_scatter::<M>(points, stride, norm, &row)
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let acc = design_scatter::<M>(points, stride, norm, &row);
-    let s = SMatrix::<f64, M, M>::from_fn(|i, j| {
-        let (a, b) = if i <= j { (i, j) } else { (j, i) };
-        acc[a][b].iter().sum()
-    });
-    smallest_eigenvector_of(s)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn design_scatter_avx2<const M: usize>(
-    points: &[[f64; 3]],
-    stride: usize,
-    norm: Norm,
-    row: &impl Fn(f64, f64, f64) -> [f64; M],
-) -> [[[f64; LANES]; M]; M] {
-    design_scatter::<M>(points, stride, norm, row)
-}
-
-/// Lane-wise upper triangle of `Σ d dᵀ` over the design rows.
-#[inline(always)]
-fn design_scatter<const M: usize>(
-    points: &[[f64; 3]],
-    stride: usize,
-    norm: Norm,
-    row: &impl Fn(f64, f64, f64) -> [f64; M],
-) -> [[[f64; LANES]; M]; M] {
-    let mut acc = [[[0.0f64; LANES]; M]; M];
-    for_lanes(
-        points,
-        stride,
-        norm,
-        #[inline(always)]
-        |q, wt| {
-            let mut d = [[0.0f64; LANES]; M];
-            for l in 0..LANES {
-                let r = row(q[0][l], q[1][l], q[2][l]);
-                for a in 0..M {
-                    d[a][l] = r[a] * wt[l];
-                }
-            }
-            for a in 0..M {
-                for b in a..M {
-                    for l in 0..LANES {
-                        acc[a][b][l] += d[a][l] * d[b][l];
-                    }
-                }
-            }
-        },
-    );
-    acc
-}
-
-/// Smallest eigenvector of the symmetric positive semi-definite `s` (see
-/// [`smallest_eigenvector`] for the seed and the method).
-fn smallest_eigenvector_of<const M: usize>(s: SMatrix<f64, M, M>) -> Option<SVector<f64, M>> {
-    // seed: the linear sphere fit |q|² = 2 c·q + d from the same moments
-    // (rows x², y², z² sum to |q|²; rows 2x, 2y, 2z and 1 are the sphere's design)
-    let l = M - 4;
-    let lin = nalgebra::Matrix4::from_fn(|i, j| s[(l + i, l + j)]);
-    let rhs = nalgebra::Vector4::from_fn(|i, _| s[(l + i, 0)] + s[(l + i, 1)] + s[(l + i, 2)]);
-    let mut v = SVector::<f64, M>::zeros();
-    match lin.cholesky().map(|c| c.solve(&rhs)) {
-        Some(sol) => {
-            // |q|² - 2c·q - d = 0: coefficient 1 on x², y², z², -c on 2x.., -d on 1
-            for i in 0..3 {
-                v[i] = 1.0;
-                v[l + i] = -sol[i];
-            }
-            v[M - 1] = -sol[3];
-        }
-        None => v.fill(1.0),
-    }
-    v /= v.norm();
-    let shift = 1e-13 * s.trace();
-    let chol = (s + SMatrix::<f64, M, M>::identity() * shift).cholesky();
-    let Some(chol) = chol else {
-        let e = SymmetricEigen::new(DMatrix::from_fn(M, M, |i, j| s[(i, j)]));
-        let i = e.eigenvalues.imin();
-        return Some(SVector::<f64, M>::from_fn(|k, _| e.eigenvectors[(k, i)]));
-    };
-    for _ in 0..50 {
-        let mut w = chol.solve(&v);
-        let n = w.norm();
-        if !(n > 0.0 && n.is_finite()) {
-            return None;
-        }
-        w /= n;
-        if w.dot(&v) < 0.0 {
-            w = -w;
-        }
-        let change = (w - v).norm();
-        v = w;
-        if change < 1e-13 {
-            break;
-        }
-    }
-    Some(v)
+    h
 }
 
 // ----------------------------------------------------------------------------------------
 // refinement
 
-struct Refined {
-    th: Vec<f64>,
+struct Refined<const P: usize> {
+    th: [f64; P],
     iterations: usize,
     converged: bool,
 }
 
-fn solve_damped<const P: usize>(
-    jtj: &SMatrix<f64, P, P>,
-    jtr: &[f64; P],
-    lambda: f64,
-) -> Option<SVector<f64, P>> {
-    let mut a = *jtj;
-    for i in 0..P {
-        a[(i, i)] += lambda * jtj[(i, i)].max(1e-12);
-    }
-    let g = SVector::<f64, P>::from_fn(|i, _| -jtr[i]);
-    a.cholesky().map(|c| c.solve(&g))
-}
-
+/// Levenberg-Marquardt (or Gauss-Newton) on `points` with the residual `r₀ - h c`; returns the
+/// solution and the sums of the pass at it (with `JᵀJ`).
 fn refine<const P: usize>(
     points: &[[f64; 3]],
-    stride: usize,
     norm: Norm,
-    model: Model,
-    mut th: Vec<f64>,
+    mut th: [f64; P],
     opts: &FitOptions,
-    half_sigma2: f64,
-) -> (Refined, Acc<P>) {
+    h: f64,
+    free: &[bool; P],
+    max_iter: usize,
+) -> (Refined<P>, Sums<P>) {
     let par = opts.parallel;
-    let mut acc = accumulate::<P>(points, stride, norm, model, &th, par, half_sigma2);
-    let mut lambda = if opts.method == Method::GaussNewton {
-        0.0
-    } else {
-        1e-3
+    let want = Want {
+        jtj: true,
+        debias: h != 0.0,
+        coverage: false,
     };
+    let gn = opts.method == Method::GaussNewton;
+    let mut acc = kernel::pass::<P>(points, &setup(norm, &th), want, par);
+    let mut cost = acc.cost(h);
+    let mut lambda = if gn { 0.0 } else { 1e-3 };
     let mut iterations = 0;
     let mut converged = false;
-    while iterations < opts.max_iter {
-        let jtj = full_matrix(&acc);
-        let step = if opts.method == Method::GaussNewton {
-            solve_damped(&jtj, &acc.jtr, 0.0).or_else(|| solve_damped(&jtj, &acc.jtr, 1e-9))
+    while iterations < max_iter {
+        let jtj = full_matrix(&acc.jtj);
+        let g = acc.jtr(h);
+        let step = if gn {
+            solve(&jtj, &g, 0.0, free).or_else(|| solve(&jtj, &g, 1e-9, free))
         } else {
-            solve_damped(&jtj, &acc.jtr, lambda)
+            solve(&jtj, &g, lambda, free)
         };
         let Some(delta) = step else {
-            if opts.method == Method::GaussNewton || lambda > 1e12 {
+            if gn || lambda > 1e12 {
                 break;
             }
             lambda = (lambda * 10.0).max(1e-6);
@@ -765,45 +388,42 @@ fn refine<const P: usize>(
         };
         // the linear model's predicted decrease of Σr²: -2 δᵀJᵀr - δᵀJᵀJδ; when even that is
         // below the tolerance, no step can help: converged without spending another pass
-        let g = SVector::<f64, P>::from_column_slice(&acc.jtr);
-        let predicted = -2.0 * delta.dot(&g) - delta.dot(&(jtj * delta));
-        if predicted <= opts.tol * acc.cost + 1e-300 {
+        let gv = SVector::<f64, P>::from_column_slice(&g);
+        let predicted = -2.0 * delta.dot(&gv) - delta.dot(&(jtj * delta));
+        if predicted <= opts.tol * cost + 1e-300 {
             converged = true;
             break;
         }
         let mut scale = 1.0;
         let mut accepted = None;
         // LM tries one step per iteration; GN halves its step up to 10 times
-        for _ in 0..if opts.method == Method::GaussNewton {
-            10
-        } else {
-            1
-        } {
+        for _ in 0..if gn { 10 } else { 1 } {
             iterations += 1;
-            let cand: Vec<f64> = th
-                .iter()
-                .zip(delta.iter())
-                .map(|(a, d)| a + scale * d)
-                .collect();
-            let cacc = accumulate::<P>(points, stride, norm, model, &cand, par, half_sigma2);
-            if cacc.cost.is_finite() && cacc.cost <= acc.cost {
-                accepted = Some((cand, cacc));
+            let mut cand = th;
+            for i in 0..P {
+                cand[i] += scale * delta[i];
+            }
+            let cacc = kernel::pass::<P>(points, &setup(norm, &cand), want, par);
+            let ccost = cacc.cost(h);
+            if ccost.is_finite() && ccost <= cost {
+                accepted = Some((cand, cacc, ccost));
                 break;
             }
             scale *= 0.5;
-            if iterations >= opts.max_iter {
+            if iterations >= max_iter {
                 break;
             }
         }
         match accepted {
-            Some((cand, cacc)) => {
-                let decrease = acc.cost - cacc.cost;
+            Some((cand, cacc, ccost)) => {
+                let decrease = cost - ccost;
                 let dnorm: f64 = delta.iter().map(|d| d * d).sum::<f64>().sqrt() * scale;
                 let tnorm: f64 = th.iter().map(|t| t * t).sum::<f64>().sqrt();
                 th = cand;
                 acc = cacc;
+                cost = ccost;
                 lambda = (lambda / 10.0).max(if lambda == 0.0 { 0.0 } else { 1e-12 });
-                if decrease <= opts.tol * acc.cost.max(1e-300) + 1e-300
+                if decrease <= opts.tol * cost.max(1e-300) + 1e-300
                     || dnorm <= 1e-14 * (tnorm + 1e-14)
                 {
                     converged = true;
@@ -811,7 +431,7 @@ fn refine<const P: usize>(
                 }
             }
             None => {
-                if opts.method == Method::GaussNewton {
+                if gn {
                     // no half step lowers the cost: a minimum to working precision
                     converged = true;
                     break;
@@ -834,14 +454,113 @@ fn refine<const P: usize>(
     )
 }
 
+/// The state the statistics are computed from.
+struct Final<const P: usize> {
+    th: [f64; P],
+    /// Sums of a pass at (or, after a polishing step, just before) `th`, with `JᵀJ`.
+    sums: Sums<P>,
+    /// `Σ r²` of the residual the fit minimised, at `th`.
+    cost: f64,
+    /// `Σ r₀²` (the plain residual) at `th`.
+    plain: f64,
+    iterations: usize,
+    converged: bool,
+    coverage: bool,
+}
+
+/// Gauss-Newton on all points from the subsample's solution `th`, with the subsample's `JᵀJ`
+/// scaled to the full size (`jtj`); see the module documentation. `None` when the passes do
+/// not contract (the caller then runs Levenberg-Marquardt on all points).
+fn polish<const P: usize>(
+    points: &[[f64; 3]],
+    norm: Norm,
+    mut th: [f64; P],
+    mut jtj: SMatrix<f64, P, P>,
+    opts: &FitOptions,
+    free: &[bool; P],
+    max_iter: usize,
+) -> std::result::Result<Final<P>, [f64; P]> {
+    let n = points.len() as f64;
+    // ρ²: how much each step shrinks the next one's predicted decrease (guessed until seen)
+    let mut rho2 = 2.5e-3;
+    let mut heavy = false;
+    let mut prev: Option<(f64, f64, f64, f64)> = None; // (h, cost, predicted decrease, f) of the last pass
+    for k in 0..MAX_POLISH.min(max_iter.max(1)) {
+        let last_chance = k + 1 >= MAX_POLISH.min(max_iter.max(1));
+        heavy |= last_chance;
+        let want = Want {
+            jtj: heavy,
+            debias: opts.debias,
+            coverage: heavy && opts.diagnostics,
+        };
+        let a = kernel::pass::<P>(points, &setup(norm, &th), want, opts.parallel);
+        let active = opts.debias && (a.r0r0 / a.wq.max(f64::MIN_POSITIVE)).sqrt() > 0.1 / n.sqrt();
+        let h = if active { half_sigma2(&a) } else { 0.0 };
+        if let Some((hp, before, decrease, _)) = prev {
+            // the last step must have achieved at least half the decrease it promised
+            let now = a.cost(hp);
+            if !(now <= before - 0.5 * decrease + 1e-12 * before + 1e-300) {
+                return Err(th);
+            }
+        }
+        if heavy {
+            jtj = full_matrix(&a.jtj);
+        }
+        let g = a.jtr(h);
+        let cost = a.cost(h);
+        let Some(delta) = solve(&jtj, &g, 0.0, free) else {
+            return Err(th);
+        };
+        let hd = jtj * delta;
+        let dhd = delta.dot(&hd).max(0.0);
+        let f = dhd / cost.max(1e-300);
+        if !f.is_finite() {
+            return Err(th);
+        }
+        if let Some((_, _, _, fp)) = prev {
+            if fp > 0.0 {
+                let seen = f / fp;
+                if seen > 0.25 {
+                    return Err(th); // not contracting
+                }
+                rho2 = seen.max(1e-4);
+            }
+        }
+        let mut next = th;
+        for i in 0..P {
+            next[i] += delta[i];
+        }
+        let done = rho2 * f <= opts.tol || f <= 1e-28;
+        if heavy && done {
+            let jtr0 = SVector::<f64, P>::from_column_slice(&a.jtr0);
+            let plain = (a.r0r0 + 2.0 * delta.dot(&jtr0) + dhd).max(0.0);
+            return Ok(Final {
+                th: next,
+                sums: a,
+                cost: (cost - dhd).max(0.0),
+                plain,
+                iterations: k + 1,
+                converged: true,
+                coverage: opts.diagnostics,
+            });
+        }
+        // the next pass is the last when this step leaves too little for another to matter,
+        // or when its own step is expected to
+        heavy = done || rho2 * rho2 * f <= opts.tol;
+        prev = Some((h, cost, dhd, f));
+        th = next;
+    }
+    Err(th)
+}
+
 // ----------------------------------------------------------------------------------------
 
 /// Fits an ellipsoid (or sphere) to `points`; see the module documentation for the model.
 ///
 /// Errors: non-finite points, too few points for the model, points on a line or plane, or
-/// points that cover too little of the sphere to determine the model's parameters.
+/// points that cover too little of the sphere to determine the model's parameters, and results
+/// that do not fit in double precision.
 pub fn fit_ellipsoid(points: &[[f64; 3]], opts: &FitOptions) -> Result<EllipsoidFit> {
-    check_finite(points)?;
     if let Some(r) = opts.radius {
         check_positive("radius", r)?;
     }
@@ -852,24 +571,129 @@ pub fn fit_ellipsoid(points: &[[f64; 3]], opts: &FitOptions) -> Result<Ellipsoid
         )));
     }
     let model = opts.model;
-    let need = model.nparams() + 1;
+    let p = model.nparams();
+    let mut nfixed = 0;
+    for (i, v) in opts.fixed.iter().enumerate() {
+        let Some(v) = *v else { continue };
+        let name = if model == Model::Sphere && i == 3 {
+            "gain"
+        } else {
+            FIXABLE[i]
+        };
+        if i >= p {
+            return Err(CalError::InvalidArgument(format!(
+                "{name} cannot be fixed in the {}: it has no such parameter",
+                model.label()
+            )));
+        }
+        if !v.is_finite() || ((3..6).contains(&i) && !(v > 0.0)) {
+            return Err(CalError::InvalidArgument(format!(
+                "fixed {name} must be a finite number{}, got {v}",
+                if (3..6).contains(&i) {
+                    " greater than zero"
+                } else {
+                    ""
+                }
+            )));
+        }
+        if i >= 3 && opts.radius.is_none() {
+            return Err(CalError::InvalidArgument(format!(
+                "fixing {name} needs radius: a gain is in calibrated units per raw unit, so give \
+                 the magnitude calibrated readings must have (e.g. radius=16384 for counts at \
+                 +-2 g, 1.0 for g)"
+            )));
+        }
+        nfixed += 1;
+    }
+    let nfree = p - nfixed;
+    if nfree == 0 {
+        return Err(CalError::InvalidArgument(format!(
+            "every parameter of the {} is fixed: nothing is left to fit",
+            model.label()
+        )));
+    }
+    let scan = geometry::scan(points, opts.parallel)?;
+    if geometry::needs_rescale(scan.max_abs) {
+        return fit_rescaled(points, opts, scan.max_abs);
+    }
+    let need = nfree.max(4);
     if points.len() < need {
         return Err(CalError::TooFewPoints {
             got: points.len(),
             need,
-            what: match model {
-                Model::Sphere => "the \"sphere\" model (offset + scale, 4 unknowns)",
-                Model::Axis => "the \"axis\" model (offset + 3 gains, 6 unknowns)",
-                Model::Full => "the \"full\" model (offset + symmetric 3x3 matrix, 9 unknowns)",
+            what: match (model, nfixed) {
+                (Model::Sphere, 0) => "the \"sphere\" model (offset + scale, 4 unknowns)",
+                (Model::Axis, 0) => "the \"axis\" model (offset + 3 gains, 6 unknowns)",
+                (Model::Full, 0) => {
+                    "the \"full\" model (offset + symmetric 3x3 matrix, 9 unknowns)"
+                }
+                _ => "the model with its fixed parameters",
             },
         });
     }
-    let sp = check_three_dimensional(points, &format!("\"{}\" model", model.name()))?;
+    let sp = geometry::classify(&scan, points.len(), model.label())?;
     match model {
-        Model::Sphere => fit_generic::<4>(points, &sp, opts),
-        Model::Axis => fit_generic::<6>(points, &sp, opts),
-        Model::Full => fit_generic::<9>(points, &sp, opts),
+        Model::Sphere => fit_generic::<4>(points, &sp, opts, nfree),
+        Model::Axis => fit_generic::<6>(points, &sp, opts, nfree),
+        Model::Full => fit_generic::<9>(points, &sp, opts, nfree),
     }
+}
+
+/// Fits readings of magnitude beyond 2^±400 by scaling them with a power of two (exact) and
+/// mapping the result back; fails when the result itself does not fit in double precision.
+fn fit_rescaled(points: &[[f64; 3]], opts: &FitOptions, max_abs: f64) -> Result<EllipsoidFit> {
+    let e = geometry::exponent(max_abs);
+    let down = |x: f64| geometry::times_pow2(x, -e);
+    let up = |x: f64| geometry::times_pow2(x, e);
+    let scaled: Vec<[f64; 3]> = points
+        .iter()
+        .map(|p| [down(p[0]), down(p[1]), down(p[2])])
+        .collect();
+    let mut o = *opts;
+    for (i, v) in o.fixed.iter_mut().enumerate() {
+        if let Some(x) = v {
+            // offsets are raw units; gains are calibrated units per raw unit
+            *x = if i < 3 { down(*x) } else { up(*x) };
+        }
+    }
+    let mut f = fit_ellipsoid(&scaled, &o)?;
+    let own_scale = opts.radius.is_none();
+    for k in 0..3 {
+        f.offset[k] = up(f.offset[k]);
+        f.stderr[k] = up(f.stderr[k]);
+    }
+    if own_scale {
+        f.radius = up(f.radius);
+        f.rms = up(f.rms);
+    } else {
+        for row in f.matrix.iter_mut() {
+            for x in row.iter_mut() {
+                *x = down(*x);
+            }
+        }
+    }
+    for k in 3..f.stderr.len() {
+        if f.model == Model::Sphere {
+            f.stderr[k] = up(f.stderr[k]); // data_radius, raw units
+        } else if !own_scale {
+            f.stderr[k] = down(f.stderr[k]);
+        }
+    }
+    let usable = |v: f64| v.is_finite() && v != 0.0;
+    let diag_ok = (0..3).all(|k| usable(f.matrix[k][k]));
+    let all_finite = f.offset.iter().all(|v| v.is_finite())
+        && f.matrix.iter().flatten().all(|v| v.is_finite())
+        && usable(f.radius);
+    if !(diag_ok && all_finite) {
+        return Err(CalError::InvalidArgument(format!(
+            "the readings (magnitude up to {max_abs:.3e}) and the radius ({}) are so far apart in \
+             scale that the calibration overflows or underflows double precision: express the \
+             readings or the radius in other units",
+            opts.radius
+                .map_or("the data's own".to_string(), |r| format!("{r:e}"))
+        )));
+    }
+    Ok(f)
 }
 
 fn not_determined(model: Model, detail: &str) -> CalError {
@@ -890,77 +714,229 @@ fn not_determined(model: Model, detail: &str) -> CalError {
     }
 }
 
+/// A subsample of about `size` points that depends only on the *set* of points, not on their
+/// order: a point is taken when a hash of its coordinates falls below `size / n` of the hash
+/// range. Heavily repeated data (few distinct values: a tiled pattern) would give a few values
+/// many times over; then one point is drawn at a fixed pseudo-random position inside each of
+/// `size` equal blocks instead (no period in the data can line up with that pick).
+fn subsample(points: &[[f64; 3]], size: usize, parallel: bool) -> Vec<[f64; 3]> {
+    let n = points.len();
+    let cut = ((size as f64 / n as f64) * 18_446_744_073_709_551_616.0) as u64;
+    let part = |c: &[[f64; 3]]| -> Vec<[f64; 3]> {
+        c.iter().filter(|p| point_hash(p) < cut).copied().collect()
+    };
+    let picked: Vec<[f64; 3]> = if parallel && n > 4 * kernel::CHUNK {
+        points
+            .par_chunks(4 * kernel::CHUNK)
+            .map(part)
+            .reduce(Vec::new, |mut a, b| {
+                a.extend_from_slice(&b);
+                a
+            })
+    } else {
+        part(points)
+    };
+    let mut hashes: Vec<u64> = picked.iter().map(point_hash).collect();
+    hashes.sort_unstable();
+    hashes.dedup();
+    if hashes.len() >= MIN_DISTINCT.min(size / 2) && picked.len() >= size / 2 {
+        return picked;
+    }
+    let nb = size.min(n).max(1);
+    (0..nb)
+        .map(|b| {
+            let lo = b * n / nb;
+            let hi = (b + 1) * n / nb;
+            let r = splitmix64(b as u64 ^ 0x7472_6961_7863_616c) % (hi - lo) as u64;
+            points[lo + r as usize]
+        })
+        .collect()
+}
+
+/// A subsample by content needs at least this many distinct points (else it is drawn by
+/// position, see [`subsample`]).
+const MIN_DISTINCT: usize = 2000;
+
+/// A well-mixed hash of a point's bits.
+#[inline(always)]
+fn point_hash(p: &[f64; 3]) -> u64 {
+    let h = p[0].to_bits().wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        ^ p[1]
+            .to_bits()
+            .wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
+            .rotate_left(21)
+        ^ p[2]
+            .to_bits()
+            .wrapping_mul(0x1656_67b1_9e37_79f9)
+            .rotate_left(42);
+    splitmix64(h)
+}
+
+/// SplitMix64: a well-mixed 64-bit hash of `x`.
+#[inline(always)]
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
 fn fit_generic<const P: usize>(
     points: &[[f64; 3]],
     sp: &Spread,
     opts: &FitOptions,
+    nfree: usize,
 ) -> Result<EllipsoidFit> {
     let model = opts.model;
     let n = points.len();
+    let s = sp.scale;
     let norm = Norm {
         mean: sp.mean,
-        inv_scale: 1.0 / sp.scale,
+        inv_scale: 1.0 / s,
     };
-    let sub = if n > SUBSAMPLE_ABOVE && opts.method != Method::Algebraic {
-        n / SUBSAMPLE_SIZE
+    // fixed parameters in normalised coordinates (gain g = W_unit R = W1 R / s)
+    let mut fix = [None; P];
+    let mut free = [true; P];
+    for i in 0..P {
+        if let Some(v) = opts.fixed[i] {
+            fix[i] = Some(if i < 3 {
+                (v - sp.mean[i]) / s
+            } else {
+                v * s / opts.radius.unwrap_or(1.0)
+            });
+            free[i] = false;
+        }
+    }
+    let subsampled = n > SUBSAMPLE_ABOVE && opts.method != Method::Algebraic;
+    let store;
+    let work: &[[f64; 3]] = if subsampled {
+        store = subsample(points, SUBSAMPLE_SIZE, opts.parallel);
+        &store
     } else {
-        1
+        points
     };
 
     // starting point
-    let start = match model {
-        Model::Sphere => None,
-        _ => algebraic_start(points, sub, norm, model),
-    };
+    let sphere = model == Model::Sphere;
+    let start = algebraic::start(work, norm, model == Model::Full, sphere, opts.parallel);
     let (o0, w0) = match start {
-        Some(s) => s,
-        None => {
-            if opts.method == Method::Algebraic && model != Model::Sphere {
-                return Err(not_determined(
-                    model,
-                    "the least-squares quadric is not an ellipsoid",
-                ));
-            }
-            let (c, r) = sphere_start(points, sub, norm)
-                .ok_or_else(|| not_determined(model, "no sphere fits them"))?;
-            (c, Matrix3::identity() / r)
+        Some(st) => st,
+        None if opts.method == Method::Algebraic && !sphere => {
+            return Err(not_determined(
+                model,
+                "the least-squares quadric is not an ellipsoid",
+            ))
         }
+        None => algebraic::start(work, norm, false, true, opts.parallel)
+            .ok_or_else(|| not_determined(model, "no sphere fits them"))?,
     };
-    let th0 = theta_of(model, o0, &w0);
+    let mut th0 = theta_of::<P>(o0, &w0);
+    for i in 0..P {
+        if let Some(v) = fix[i] {
+            th0[i] = v;
+        }
+    }
 
-    let (th, iterations, converged, acc, final_half_sigma2) = if opts.method == Method::Algebraic {
-        let acc = accumulate::<P>(points, 1, norm, model, &th0, opts.parallel, 0.0);
-        (th0, 0, true, acc, 0.0)
+    let fin = if opts.method == Method::Algebraic {
+        let want = Want {
+            jtj: true,
+            debias: false,
+            coverage: opts.diagnostics,
+        };
+        let a = kernel::pass::<P>(points, &setup(norm, &th0), want, opts.parallel);
+        Final {
+            th: th0,
+            cost: a.r0r0,
+            plain: a.r0r0,
+            sums: a,
+            iterations: 0,
+            converged: true,
+            coverage: opts.diagnostics,
+        }
     } else {
         // plain geometric fit, then the debiasing rounds, each started from the previous
-        // solution; large inputs do all of that on a strided subsample and finish on all points
-        let (mut r, mut acc) = refine::<P>(points, sub, norm, model, th0, opts, 0.0);
+        // solution; large inputs do all of that on the subsample and polish on all points
+        let (mut r, mut acc) = refine::<P>(work, norm, th0, opts, 0.0, &free, opts.max_iter);
         let mut iterations = r.iterations;
-        let mut half_sigma2 = 0.0;
+        let mut h = 0.0;
         // the O(σ²) bias matters only when it is not buried in the statistical error (σ/√N
         // relative): correct when σ² > σ / (10 √N), i.e. σ > 0.1 / √N in unit-radius terms
-        let sigma2_est = acc.cost / acc.wq.max(f64::MIN_POSITIVE);
-        let n_used = (n / sub).max(1) as f64;
-        if opts.debias && sigma2_est.sqrt() > 0.1 / n_used.sqrt() {
+        let sigma2_est = acc.r0r0 / acc.wq.max(f64::MIN_POSITIVE);
+        let exact = n == nfree;
+        if opts.debias && !exact && sigma2_est.sqrt() > 0.1 / (work.len() as f64).sqrt() {
             for _ in 0..2 {
-                half_sigma2 = 0.5 * acc.cost / acc.wq.max(f64::MIN_POSITIVE);
-                let (r2, acc2) = refine::<P>(points, sub, norm, model, r.th, opts, half_sigma2);
+                h = half_sigma2(&acc);
+                let left = opts.max_iter.saturating_sub(iterations);
+                let (r2, acc2) = refine::<P>(work, norm, r.th, opts, h, &free, left);
                 iterations += r2.iterations;
                 (r, acc) = (r2, acc2);
             }
         }
-        if sub > 1 {
-            let (r2, acc2) = refine::<P>(points, 1, norm, model, r.th, opts, half_sigma2);
-            iterations += r2.iterations;
-            (r, acc) = (r2, acc2);
+        if subsampled {
+            let left = opts.max_iter.saturating_sub(iterations);
+            let jtj = full_matrix(&acc.jtj) * (n as f64 / work.len() as f64);
+            match polish::<P>(points, norm, r.th, jtj, opts, &free, left) {
+                Ok(mut f) => {
+                    f.iterations += iterations;
+                    f
+                }
+                Err(th) => {
+                    // the polish did not contract: Levenberg-Marquardt on all points, with the
+                    // noise level of all points
+                    let want = Want {
+                        jtj: false,
+                        debias: opts.debias,
+                        coverage: false,
+                    };
+                    let a = kernel::pass::<P>(points, &setup(norm, &th), want, opts.parallel);
+                    let active = opts.debias
+                        && (a.r0r0 / a.wq.max(f64::MIN_POSITIVE)).sqrt() > 0.1 / (n as f64).sqrt();
+                    let h = if active { half_sigma2(&a) } else { 0.0 };
+                    let left = opts.max_iter.saturating_sub(iterations + MAX_POLISH);
+                    let (r2, acc2) = refine::<P>(points, norm, th, opts, h, &free, left);
+                    Final {
+                        th: r2.th,
+                        cost: acc2.cost(h),
+                        plain: acc2.r0r0,
+                        sums: acc2,
+                        iterations: iterations + MAX_POLISH + r2.iterations,
+                        converged: r2.converged,
+                        coverage: false,
+                    }
+                }
+            }
+        } else {
+            Final {
+                th: r.th,
+                cost: acc.cost(h),
+                plain: acc.r0r0,
+                sums: acc,
+                iterations,
+                converged: r.converged,
+                coverage: false,
+            }
         }
-        (r.th, iterations, r.converged, acc, half_sigma2)
     };
+    finish::<P>(points, sp, norm, opts, fin, &free, nfree)
+}
 
+/// Standard errors, physical bounds, coverage and the mapping back to raw units.
+fn finish<const P: usize>(
+    points: &[[f64; 3]],
+    sp: &Spread,
+    norm: Norm,
+    opts: &FitOptions,
+    mut fin: Final<P>,
+    free: &[bool; P],
+    nfree: usize,
+) -> Result<EllipsoidFit> {
+    let model = opts.model;
+    let n = points.len();
+    let th = fin.th;
     // W and -W (or any sign flip of an eigenvalue) give the same residuals: take |W|
     // (W itself when it is positive definite, the usual case).
-    let w_raw = w_of(model, &th);
-    let ev = crate::geometry::sym3_eigenvalues(&w_raw);
+    let w_raw = w_of(&th);
+    let ev = geometry::sym3_eigenvalues(&w_raw);
     let w1 = if ev[2] > 1e-9 * ev[0] && ev.iter().all(|v| v.is_finite()) {
         w_raw
     } else {
@@ -973,8 +949,18 @@ fn fit_generic<const P: usize>(
         (w + w.transpose()) * 0.5
     };
 
-    // conditioning and standard errors in normalised coordinates
-    let jtj = full_matrix(&acc);
+    // conditioning and standard errors in normalised coordinates (fixed parameters: rows and
+    // columns of the identity, standard error 0)
+    let mut jtj = full_matrix(&fin.sums.jtj);
+    for i in 0..P {
+        if !free[i] {
+            for j in 0..P {
+                jtj[(i, j)] = 0.0;
+                jtj[(j, i)] = 0.0;
+            }
+            jtj[(i, i)] = 1.0;
+        }
+    }
     let dscale = SVector::<f64, P>::from_fn(|i, _| 1.0 / jtj[(i, i)].max(1e-300).sqrt());
     let scaled = SMatrix::<f64, P, P>::from_fn(|i, j| jtj[(i, j)] * dscale[i] * dscale[j]);
     let Some(inv) = scaled.cholesky().map(|c| c.inverse()) else {
@@ -988,43 +974,71 @@ fn fit_generic<const P: usize>(
             &format!("condition number {condition:.1e}"),
         ));
     }
-    let dof = (n - P).max(1) as f64;
-    let sigma2 = acc.cost / dof;
-    let cov_diag: Vec<f64> = (0..P)
-        .map(|i| inv[(i, i)] * dscale[i] * dscale[i] * sigma2)
-        .collect();
-    let se_th: Vec<f64> = cov_diag.iter().map(|v| v.max(0.0).sqrt()).collect();
+    let exact = n == nfree;
+    let sigma2 = if exact {
+        f64::NAN
+    } else {
+        fin.cost / (n - nfree) as f64
+    };
+    let mut se_th = [0.0; P];
+    for i in 0..P {
+        if free[i] {
+            se_th[i] = (inv[(i, i)] * dscale[i] * dscale[i] * sigma2)
+                .max(0.0)
+                .sqrt();
+            if exact {
+                se_th[i] = f64::NAN;
+            }
+        }
+    }
 
     // back to raw units: p = mean + scale q, so offset = mean + scale o, W_unit = W1 / scale
     let s = sp.scale;
     let o = Vector3::new(th[0], th[1], th[2]);
     let offset = sp.mean + o * s;
     let w_unit = w1 / s;
-    let (radius, factor) = match opts.radius {
-        Some(r) => (r, r),
-        None => {
-            let rho = w_unit.determinant().abs().powf(-1.0 / 3.0);
-            (rho, rho)
-        }
+    let radius = match opts.radius {
+        Some(r) => r,
+        // det(W_unit)^(-1/3) = s det(W1)^(-1/3), without forming s³
+        None => s * w1.determinant().abs().powf(-1.0 / 3.0),
     };
-    let mut matrix = w_unit * factor;
-    if model == Model::Sphere && opts.radius.is_none() {
-        matrix = Matrix3::identity();
+    let mut matrix = if model == Model::Sphere && opts.radius.is_none() {
+        Matrix3::identity()
+    } else {
+        w_unit * radius
+    };
+    let mut offset = offset;
+    // fixed values come back exactly as given (not through the normalisation's round-off)
+    for (i, v) in opts.fixed.iter().enumerate().take(P) {
+        let Some(v) = *v else { continue };
+        match i {
+            0..=2 => offset[i] = v,
+            3 if model == Model::Sphere => matrix = Matrix3::identity() * v,
+            3..=5 => matrix[(i - 3, i - 3)] = v,
+            _ => {
+                let (a, b) = [(0, 1), (0, 2), (1, 2)][i - 6];
+                matrix[(a, b)] = v;
+                matrix[(b, a)] = v;
+            }
+        }
     }
     let mut stderr: Vec<f64> = se_th[..3].iter().map(|v| v * s).collect();
-    match model {
-        Model::Sphere => {
-            let k = th[3].abs();
-            stderr.push(s / (k * k) * se_th[3]); // data radius = s / k
-        }
-        _ => stderr.extend(se_th[3..].iter().map(|v| v / s * factor)),
+    if model == Model::Sphere {
+        let k = th[3].abs();
+        stderr.push(s / (k * k) * se_th[3]); // data radius = s / k
+    } else {
+        stderr.extend(se_th[3..].iter().map(|v| v / s * radius));
     }
 
     // physical bounds (rust/bounds.rs): implausible gains, or a run-away unconverged fit
     bounds::check_axis_ratio(&w1, model.name())?;
     let raw_radius = radius / matrix.norm() * 3f64.sqrt();
-    let worst = stderr[..3].iter().cloned().fold(0.0, f64::max) / raw_radius;
-    if !converged && worst > bounds::MAX_UNCONVERGED_OFFSET_SE {
+    let worst = if exact {
+        0.0
+    } else {
+        stderr[..3].iter().cloned().fold(0.0, f64::max) / raw_radius
+    };
+    if !fin.converged && worst > bounds::MAX_UNCONVERGED_OFFSET_SE {
         return Err(not_determined(
             model,
             &format!(
@@ -1034,40 +1048,66 @@ fn fit_generic<const P: usize>(
             ),
         ));
     }
+    let rms = (fin.plain / n as f64).sqrt() * radius;
     let mut warnings = Vec::new();
-    if !converged {
-        warnings.push(format!(
-            "the fit did not converge in {} iterations: the result may be inaccurate; raise \
-             max_iter or check the data",
-            opts.max_iter
-        ));
+    if opts.diagnostics {
+        if exact {
+            warnings.push(format!(
+                "{n} readings for {nfree} unknowns: an exactly determined solve, so no residual \
+                 is left to estimate the noise or the standard errors from (they are NaN); add \
+                 readings in more orientations to get them"
+            ));
+        }
+        if !fin.converged {
+            warnings.push(format!(
+                "the fit did not converge in {} iterations: the result may be inaccurate; raise \
+                 max_iter or check the data",
+                opts.max_iter
+            ));
+        }
+        if worst > bounds::WARN_OFFSET_SE {
+            warnings.push(format!(
+                "the offset is poorly determined (standard error up to {:.1}% of the radius): the \
+                 points cover only part of the sphere; turn the sensor through more orientations",
+                100.0 * worst
+            ));
+        } else if condition > 1e8 {
+            warnings.push(format!(
+                "the fit is ill-conditioned (condition number {condition:.1e}): the points cover \
+                 only part of the sphere; turn the sensor through more orientations"
+            ));
+        }
+        // coverage of the sphere by the calibrated directions
+        if !fin.coverage {
+            let want = Want {
+                jtj: false,
+                debias: false,
+                coverage: true,
+            };
+            let mut th1 = th;
+            let w1t = theta_of::<9>(o, &w1);
+            th1[3..P].copy_from_slice(&w1t[3..P]);
+            let c = kernel::pass::<P>(points, &setup(norm, &th1), want, opts.parallel);
+            fin.sums.dd = c.dd;
+            fin.sums.faces = c.faces;
+            fin.sums.count = c.count;
+        }
+        let a = &fin.sums;
+        let cnt = a.count.max(1.0);
+        let t = Matrix3::new(
+            a.dd[0], a.dd[3], a.dd[4], a.dd[3], a.dd[1], a.dd[5], a.dd[4], a.dd[5], a.dd[2],
+        ) / cnt;
+        let min_spread = geometry::sym3_eigenvalues(&t)[2];
+        // the weakest direction is only needed for a warning
+        let weak = if min_spread < bounds::WARN_MIN_SPREAD {
+            let e = SymmetricEigen::new(t);
+            e.eigenvectors.column(e.eigenvalues.imin()).into_owned()
+        } else {
+            Vector3::z()
+        };
+        let faces = a.faces.map(|c| c as usize);
+        warnings.extend(bounds::coverage_warnings(&faces, min_spread, &weak));
     }
-    if worst > bounds::WARN_OFFSET_SE {
-        warnings.push(format!(
-            "the offset is poorly determined (standard error up to {:.1}% of the radius): the \
-             points cover only part of the sphere; turn the sensor through more orientations",
-            100.0 * worst
-        ));
-    } else if condition > 1e8 {
-        warnings.push(format!(
-            "the fit is ill-conditioned (condition number {condition:.1e}): the points cover only \
-             part of the sphere; turn the sensor through more orientations"
-        ));
-    }
-    // coverage of the sphere by the calibrated directions, and the plain RMS of
-    // |calibrated| - radius (one more streaming pass)
-    let rms = if opts.diagnostics || final_half_sigma2 != 0.0 {
-        let cov = coverage_pass(points, norm, &w1, &o);
-        warnings.extend(bounds::coverage_warnings(
-            &cov.faces,
-            cov.min_spread,
-            &cov.weak,
-        ));
-        (cov.ss / n as f64).sqrt() * radius
-    } else {
-        // the last accumulation was at these parameters with the plain residual
-        (acc.cost / n as f64).sqrt() * radius
-    };
     let mut m = [[0.0; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
@@ -1081,127 +1121,12 @@ fn fit_generic<const P: usize>(
         radius,
         rms,
         stderr,
-        iterations,
-        converged,
+        iterations: fin.iterations,
+        converged: fin.converged,
         condition,
         n,
         warnings,
     })
-}
-
-struct Coverage {
-    /// Σ (‖v‖ - 1)² over the points.
-    ss: f64,
-    faces: [usize; 6],
-    min_spread: f64,
-    weak: Vector3<f64>,
-}
-
-/// One pass over the calibrated unit-radius vectors `v = W1 (q - o)`: the plain sum of squared
-/// residuals, and the coverage of directions (face counts and the direction scatter matrix,
-/// see `bounds`).
-fn coverage_pass(points: &[[f64; 3]], norm: Norm, w1: &Matrix3<f64>, o: &Vector3<f64>) -> Coverage {
-    #[cfg(target_arch = "x86_64")]
-    if simd::has_avx2_fma() {
-        return simd::avx2_call!(coverage_pass_avx2(points, norm, w1, o));
-    }
-    coverage_pass_impl(points, norm, w1, o)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn coverage_pass_avx2(
-    points: &[[f64; 3]],
-    norm: Norm,
-    w1: &Matrix3<f64>,
-    o: &Vector3<f64>,
-) -> Coverage {
-    coverage_pass_impl(points, norm, w1, o)
-}
-
-#[inline(always)]
-fn coverage_pass_impl(
-    points: &[[f64; 3]],
-    norm: Norm,
-    w1: &Matrix3<f64>,
-    o: &Vector3<f64>,
-) -> Coverage {
-    let wm = [
-        [w1[(0, 0)], w1[(0, 1)], w1[(0, 2)]],
-        [w1[(1, 0)], w1[(1, 1)], w1[(1, 2)]],
-        [w1[(2, 0)], w1[(2, 1)], w1[(2, 2)]],
-    ];
-    let mut ss = [0.0f64; LANES];
-    let mut t = [[0.0f64; LANES]; 6]; // xx yy zz xy xz yz of unit directions
-    let mut faces = [0usize; 6];
-    let mut count = 0usize;
-    for_lanes(
-        points,
-        1,
-        norm,
-        #[inline(always)]
-        |q, wt| {
-            let mut d = [[0.0f64; LANES]; 3];
-            for l in 0..LANES {
-                let u = [q[0][l] - o.x, q[1][l] - o.y, q[2][l] - o.z];
-                let v = [
-                    wm[0][0] * u[0] + wm[0][1] * u[1] + wm[0][2] * u[2],
-                    wm[1][0] * u[0] + wm[1][1] * u[1] + wm[1][2] * u[2],
-                    wm[2][0] * u[0] + wm[2][1] * u[1] + wm[2][2] * u[2],
-                ];
-                let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                ss[l] += (n - 1.0) * (n - 1.0) * wt[l];
-                let inv = if n > 0.0 { wt[l] / n } else { 0.0 };
-                for k in 0..3 {
-                    d[k][l] = v[k] * inv;
-                }
-            }
-            for l in 0..LANES {
-                t[0][l] += d[0][l] * d[0][l];
-                t[1][l] += d[1][l] * d[1][l];
-                t[2][l] += d[2][l] * d[2][l];
-                t[3][l] += d[0][l] * d[1][l];
-                t[4][l] += d[0][l] * d[2][l];
-                t[5][l] += d[1][l] * d[2][l];
-            }
-            for l in 0..LANES {
-                if wt[l] > 0.0 {
-                    let dv = Vector3::new(d[0][l], d[1][l], d[2][l]);
-                    let i = dv.iamax();
-                    if dv[i] != 0.0 {
-                        faces[2 * i + usize::from(dv[i] < 0.0)] += 1;
-                        count += 1;
-                    }
-                }
-            }
-        },
-    );
-    let sum = |a: &[f64; LANES]| a.iter().sum::<f64>() / count.max(1) as f64;
-    let tm = Matrix3::new(
-        sum(&t[0]),
-        sum(&t[3]),
-        sum(&t[4]),
-        sum(&t[3]),
-        sum(&t[1]),
-        sum(&t[5]),
-        sum(&t[4]),
-        sum(&t[5]),
-        sum(&t[2]),
-    );
-    let min_spread = crate::geometry::sym3_eigenvalues(&tm)[2];
-    // the weakest direction is only needed for a warning
-    let weak = if min_spread < bounds::WARN_MIN_SPREAD {
-        let e = SymmetricEigen::new(tm);
-        e.eigenvectors.column(e.eigenvalues.imin()).into_owned()
-    } else {
-        Vector3::z()
-    };
-    Coverage {
-        ss: ss.iter().sum(),
-        faces,
-        min_spread,
-        weak,
-    }
 }
 
 /// Applies a fit: `out[i] = W (points[i] - offset)`.
@@ -1300,10 +1225,10 @@ mod tests {
 
     #[test]
     fn too_few_points_and_cap_errors() {
-        let pts = ellipsoid_points([0.0; 3], Matrix3::identity(), 1.0, 9);
+        let pts = ellipsoid_points([0.0; 3], Matrix3::identity(), 1.0, 8);
         assert!(matches!(
             fit_ellipsoid(&pts, &FitOptions::default()),
-            Err(CalError::TooFewPoints { need: 10, .. })
+            Err(CalError::TooFewPoints { need: 9, .. })
         ));
         // a thin cap: all points within ~3 degrees of the north pole
         let cap: Vec<[f64; 3]> = (0..200)
@@ -1315,6 +1240,120 @@ mod tests {
             .collect();
         let e = fit_ellipsoid(&cap, &FitOptions::default()).unwrap_err();
         assert!(matches!(e, CalError::Degenerate { .. }), "{e}");
+    }
+
+    #[test]
+    fn six_points_solve_the_axis_model_exactly() {
+        let w = Matrix3::from_diagonal(&Vector3::new(1.02, 0.97, 1.01)) / 16384.0;
+        let winv = w.try_inverse().unwrap();
+        let faces = [
+            Vector3::x(),
+            -Vector3::x(),
+            Vector3::y(),
+            -Vector3::y(),
+            Vector3::z(),
+            -Vector3::z(),
+        ];
+        let pts: Vec<[f64; 3]> = faces
+            .iter()
+            .map(|f| {
+                let p = winv * (f + Vector3::new(0.01, -0.02, 0.015)).normalize()
+                    + Vector3::new(300.0, -200.0, 50.0);
+                [p.x, p.y, p.z]
+            })
+            .collect();
+        let opts = FitOptions {
+            model: Model::Axis,
+            radius: Some(1.0),
+            ..Default::default()
+        };
+        let f = fit_ellipsoid(&pts, &opts).unwrap();
+        assert!(
+            f.rms < 1e-12 && f.stderr.iter().all(|v| v.is_nan()),
+            "{f:?}"
+        );
+        assert!(f.warnings.iter().any(|w| w.contains("exactly determined")));
+        assert!(matches!(
+            fit_ellipsoid(&pts[..5], &opts),
+            Err(CalError::TooFewPoints { need: 6, .. })
+        ));
+    }
+
+    #[test]
+    fn fixed_gain_sphere_fits_the_centre_only() {
+        let pts = ellipsoid_points([10.0, -20.0, 30.0], Matrix3::identity() / 100.0, 1.0, 200);
+        // a 60 degree cap around +z
+        let cap: Vec<[f64; 3]> = pts.iter().filter(|p| p[2] - 30.0 > 50.0).copied().collect();
+        let mut fixed = [None; 9];
+        fixed[3] = Some(1.0);
+        let opts = FitOptions {
+            model: Model::Sphere,
+            radius: Some(100.0),
+            fixed,
+            ..Default::default()
+        };
+        let f = fit_ellipsoid(&cap, &opts).unwrap();
+        for k in 0..3 {
+            assert!(
+                (f.offset[k] - [10.0, -20.0, 30.0][k]).abs() < 1e-8,
+                "{:?}",
+                f.offset
+            );
+        }
+        assert_eq!(
+            f.matrix,
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+        );
+        assert_eq!(f.stderr[3], 0.0);
+    }
+
+    #[test]
+    fn large_inputs_do_not_depend_on_point_order() {
+        let w = Matrix3::new(1.02, 0.01, 0.0, 0.01, 0.98, 0.0, 0.0, 0.0, 1.0);
+        let mut pts = ellipsoid_points([0.1, 0.2, -0.3], w, 1.0, 70_001);
+        // a little deterministic "noise" so that the minimum is not exact
+        for (i, p) in pts.iter_mut().enumerate() {
+            p[0] += 1e-3 * ((i * 7919 % 1000) as f64 / 500.0 - 1.0);
+        }
+        let a = fit_ellipsoid(&pts, &FitOptions::default()).unwrap();
+        pts.reverse();
+        pts.rotate_left(12_345);
+        let b = fit_ellipsoid(&pts, &FitOptions::default()).unwrap();
+        for k in 0..3 {
+            assert!((a.offset[k] - b.offset[k]).abs() < 1e-12, "{a:?} {b:?}");
+            for j in 0..3 {
+                assert!((a.matrix[k][j] - b.matrix[k][j]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn huge_and_tiny_magnitudes_are_rescaled_exactly() {
+        let w = Matrix3::from_diagonal(&Vector3::new(1.1, 0.9, 1.0));
+        let pts = ellipsoid_points([0.1, 0.2, -0.3], w, 1.0, 300);
+        let base = fit_ellipsoid(
+            &pts,
+            &FitOptions {
+                radius: Some(1.0),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        for k in [1e200, 1e-200, 1e300] {
+            let big: Vec<[f64; 3]> = pts.iter().map(|p| p.map(|v| v * k)).collect();
+            let f = fit_ellipsoid(
+                &big,
+                &FitOptions {
+                    radius: Some(1.0),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            for i in 0..3 {
+                assert!((f.offset[i] / k - base.offset[i]).abs() < 1e-9);
+                assert!((f.matrix[i][i] * k - base.matrix[i][i]).abs() < 1e-9);
+            }
+        }
     }
 
     proptest! {

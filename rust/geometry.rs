@@ -4,8 +4,9 @@
 //! offsets of thousands condition as well as data in g. The principal spreads tell a cloud on a
 //! line or a plane from one that can determine a sphere or an ellipsoid.
 
-use crate::error::{CalError, Result};
+use crate::error::{check_finite, CalError, Result};
 use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
 
 /// Centroid, RMS distance from it and principal variances of a point cloud.
 #[derive(Debug, Clone, Copy)]
@@ -22,17 +23,82 @@ pub struct Spread {
 /// millionth of the largest one).
 pub const FLAT_RATIO: f64 = 1e-12;
 
-/// Computes the [`Spread`] of `points` in one streaming pass (sums of the points shifted by the
-/// first one, so that large offsets do not cancel).
-pub fn spread(points: &[[f64; 3]]) -> Spread {
-    let n = points.len().max(1) as f64;
+/// Readings whose largest magnitude is outside `[2^-RESCALE_EXP, 2^RESCALE_EXP]` are rescaled
+/// by a power of two before fitting, so that no square or sum of squares overflows or
+/// underflows (the rescaling is exact).
+pub const RESCALE_EXP: i32 = 400;
+
+/// The sums of one pass over a point cloud: moments about the first point (so that large
+/// offsets do not cancel), the largest magnitude of any coordinate.
+#[derive(Debug, Clone, Copy)]
+pub struct Scan {
+    /// The first point (the moments are about it).
+    pub p0: [f64; 3],
+    /// Number of points.
+    pub n: usize,
+    /// Σ (p - p0).
+    pub s1: [f64; 3],
+    /// Σ of the products of (p - p0): xx yy zz xy xz yz.
+    pub s2: [f64; 6],
+    /// Largest |coordinate|.
+    pub max_abs: f64,
+}
+
+/// Points per rayon task of [`scan`]; smaller inputs are scanned on the calling thread.
+const SCAN_CHUNK: usize = 16_384;
+
+/// One pass over `points`: fails with [`CalError::NonFinite`] at the first NaN or infinite
+/// coordinate, and otherwise returns the moments and the largest magnitude.
+pub fn scan(points: &[[f64; 3]], parallel: bool) -> Result<Scan> {
     let p0 = points.first().copied().unwrap_or([0.0; 3]);
+    let part = |c: &[[f64; 3]]| scan_part(c, p0);
+    let (s1, s2, max_abs, probe) = if parallel && points.len() > 4 * SCAN_CHUNK {
+        points.par_chunks(SCAN_CHUNK).map(part).reduce(
+            || ([0.0; 3], [0.0; 6], 0.0, 0.0),
+            |a, b| {
+                let mut s1 = a.0;
+                let mut s2 = a.1;
+                for k in 0..3 {
+                    s1[k] += b.0[k];
+                }
+                for k in 0..6 {
+                    s2[k] += b.1[k];
+                }
+                (s1, s2, a.2.max(b.2), a.3 + b.3)
+            },
+        )
+    } else {
+        part(points)
+    };
+    if !probe.is_finite() || probe != 0.0 {
+        check_finite(points)?;
+    }
+    Ok(Scan {
+        p0,
+        n: points.len(),
+        s1,
+        s2,
+        max_abs,
+    })
+}
+
+/// Moments about `p0`, the largest magnitude, and a probe that is 0 when every coordinate is
+/// finite (`x - x` is NaN for NaN and infinities).
+fn scan_part(points: &[[f64; 3]], p0: [f64; 3]) -> ([f64; 3], [f64; 6], f64, f64) {
     let mut s1 = [0.0f64; 3];
-    let mut s2 = [0.0f64; 6]; // xx yy zz xy xz yz
+    let mut s2 = [0.0f64; 6];
+    let mut m = 0.0f64;
+    let mut probe = 0.0f64;
     for p in points {
         let d = [p[0] - p0[0], p[1] - p0[1], p[2] - p0[2]];
         for k in 0..3 {
             s1[k] += d[k];
+            // x - x is 0 for finite x and NaN for NaN or infinities
+            #[allow(clippy::eq_op)]
+            {
+                probe += p[k] - p[k];
+            }
+            m = m.max(p[k].abs());
         }
         s2[0] += d[0] * d[0];
         s2[1] += d[1] * d[1];
@@ -41,6 +107,48 @@ pub fn spread(points: &[[f64; 3]]) -> Spread {
         s2[4] += d[0] * d[2];
         s2[5] += d[1] * d[2];
     }
+    (s1, s2, m, probe)
+}
+
+/// Whether readings of largest magnitude `max_abs` must be rescaled (see [`RESCALE_EXP`]).
+pub fn needs_rescale(max_abs: f64) -> bool {
+    let lim = 2f64.powi(RESCALE_EXP);
+    max_abs > lim || (max_abs > 0.0 && max_abs < 1.0 / lim)
+}
+
+/// The power of two `e` with `x = m 2^e`, `0.5 <= m < 1` (`x` finite and non-zero).
+pub fn exponent(x: f64) -> i32 {
+    let bits = x.abs().to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i32;
+    if biased == 0 {
+        // subnormal: the position of the leading bit of the mantissa
+        let mant = bits & ((1u64 << 52) - 1);
+        -1074 + 64 - mant.leading_zeros() as i32
+    } else {
+        biased - 1022
+    }
+}
+
+/// `x 2^e`, exact unless the result overflows or underflows (in two steps, so that any `e`
+/// between -2098 and 2098 is fine).
+pub fn times_pow2(x: f64, e: i32) -> f64 {
+    let a = e / 2;
+    let b = e - a;
+    x * pow2(a) * pow2(b)
+}
+
+fn pow2(e: i32) -> f64 {
+    if e >= -1022 {
+        f64::from_bits(((e + 1023) as u64) << 52)
+    } else {
+        f64::from_bits(1u64 << (e + 1074))
+    }
+}
+
+/// The [`Spread`] of a [`Scan`].
+pub fn spread_of(s: &Scan) -> Spread {
+    let n = s.n.max(1) as f64;
+    let (s1, s2) = (s.s1, s.s2);
     let m = [s1[0] / n, s1[1] / n, s1[2] / n];
     let c = |i: usize, a: usize, b: usize| s2[i] / n - m[a] * m[b];
     let cov = Matrix3::new(
@@ -54,7 +162,7 @@ pub fn spread(points: &[[f64; 3]]) -> Spread {
         c(5, 1, 2),
         c(2, 2, 2),
     );
-    let mean = Vector3::new(p0[0] + m[0], p0[1] + m[1], p0[2] + m[2]);
+    let mean = Vector3::new(s.p0[0] + m[0], s.p0[1] + m[1], s.p0[2] + m[2]);
     let scale = cov.trace().max(0.0).sqrt();
     let v = sym3_eigenvalues(&cov);
     Spread {
@@ -64,17 +172,38 @@ pub fn spread(points: &[[f64; 3]]) -> Spread {
     }
 }
 
+/// Computes the [`Spread`] of `points` in one streaming pass (non-finite points give NaN).
+pub fn spread(points: &[[f64; 3]]) -> Spread {
+    let p0 = points.first().copied().unwrap_or([0.0; 3]);
+    let (s1, s2, max_abs, _) = scan_part(points, p0);
+    spread_of(&Scan {
+        p0,
+        n: points.len(),
+        s1,
+        s2,
+        max_abs,
+    })
+}
+
 /// Eigenvalues of a symmetric 3x3 matrix, largest first, in closed form (the trigonometric
 /// solution of the characteristic cubic). Absolute accuracy: a few ulps of the largest
 /// eigenvalue, except that two nearly equal eigenvalues are only good to about 1e-8 of it
 /// (acos is ill-conditioned there); the callers compare ratios with thresholds far from both.
 pub fn sym3_eigenvalues(a: &Matrix3<f64>) -> [f64; 3] {
+    // scaled to a largest entry of 1, so that the squares below cannot overflow or underflow
+    let m = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(m > 0.0 && m.is_finite()) {
+        let mut d = [a[(0, 0)], a[(1, 1)], a[(2, 2)]];
+        d.sort_by(|x, y| y.total_cmp(x));
+        return d;
+    }
+    let a = a / m;
     let p1 = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
     let q = a.trace() / 3.0;
     let p2 = (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * p1;
     let p = (p2 / 6.0).sqrt();
     if !(p > 0.0) {
-        let mut d = [a[(0, 0)], a[(1, 1)], a[(2, 2)]];
+        let mut d = [a[(0, 0)] * m, a[(1, 1)] * m, a[(2, 2)] * m];
         d.sort_by(|x, y| y.total_cmp(x));
         return d;
     }
@@ -83,22 +212,26 @@ pub fn sym3_eigenvalues(a: &Matrix3<f64>) -> [f64; 3] {
     let phi = r.acos() / 3.0;
     let e1 = q + 2.0 * p * phi.cos();
     let e3 = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
-    [e1, 3.0 * q - e1 - e3, e3]
+    [e1 * m, (3.0 * q - e1 - e3) * m, e3 * m]
 }
 
 /// Fails unless the points span all three dimensions.
 ///
 /// `what` names the model for the message. Points that are all equal, on a line or on a plane
-/// cannot determine a centre in three dimensions whatever the model.
+/// cannot determine a centre in three dimensions whatever the model. The points must be finite
+/// and within [`RESCALE_EXP`] binary orders of magnitude of 1 (see [`needs_rescale`]).
 pub fn check_three_dimensional(points: &[[f64; 3]], what: &str) -> Result<Spread> {
-    let s = spread(points);
-    let [l1, l2, l3] = s.variances;
-    if !(l1 > 0.0) || s.scale == 0.0 {
+    let s = scan(points, false)?;
+    classify(&s, points.len(), what)
+}
+
+/// [`check_three_dimensional`] from a [`Scan`] of `n` points.
+pub fn classify(s: &Scan, n: usize, what: &str) -> Result<Spread> {
+    let sp = spread_of(s);
+    let [l1, l2, l3] = sp.variances;
+    if !(l1 > 0.0) || sp.scale == 0.0 {
         return Err(CalError::Degenerate {
-            why: format!(
-                "all {} points are identical, so the {what} is undetermined",
-                points.len()
-            ),
+            why: format!("all {n} points are identical, so the {what} is undetermined"),
             fix: "the sensor did not move or the readings are stuck: check the wiring, then turn \
                   the sensor through many orientations"
                 .into(),
@@ -120,7 +253,7 @@ pub fn check_three_dimensional(points: &[[f64; 3]], what: &str) -> Result<Spread
                 .into(),
         });
     }
-    Ok(s)
+    Ok(sp)
 }
 
 #[cfg(test)]

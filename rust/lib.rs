@@ -14,12 +14,14 @@
 //! assert!((fit.offset[0] - 0.1).abs() < 1e-9);
 //! ```
 
+mod algebraic;
 pub mod allan;
 pub mod batch;
 pub mod bounds;
 pub mod ellipsoid;
 pub mod error;
 pub mod geometry;
+mod kernel;
 mod simd;
 pub mod sphere;
 

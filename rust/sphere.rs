@@ -9,8 +9,10 @@
 //! The error sum is the one of `../shared/seeds/sphere-center-descent.txt`:
 //! `E(c) = sum_i |(x_i - c_x)^2 + (y_i - c_y)^2 + (z_i - c_z)^2 - R^2|`.
 
-use crate::error::{check_finite, check_positive, CalError, Result};
-use crate::geometry::check_three_dimensional;
+use crate::error::{check_positive, CalError, Result};
+use crate::geometry;
+use crate::kernel::{Arith, Fused, Separate};
+use crate::simd;
 use nalgebra::{Matrix4, Vector3, Vector4};
 use rayon::prelude::*;
 
@@ -71,7 +73,7 @@ impl Default for DescentOptions {
 /// assert_eq!(e, 3.0);
 /// ```
 pub fn sphere_error(points: &[[f64; 3]], center: [f64; 3], radius: f64) -> Result<f64> {
-    check_finite(points)?;
+    let scan = geometry::scan(points, true)?;
     if !radius.is_finite() || radius < 0.0 {
         return Err(CalError::InvalidArgument(format!(
             "radius must be a finite number >= 0, got {radius}"
@@ -80,24 +82,97 @@ pub fn sphere_error(points: &[[f64; 3]], center: [f64; 3], radius: f64) -> Resul
     if !center.iter().all(|c| c.is_finite()) {
         return Err(CalError::InvalidArgument("center must be finite".into()));
     }
+    let m = magnitude(scan.max_abs, &[radius]);
+    if geometry::needs_rescale(m) {
+        let e = geometry::exponent(m);
+        let pts = rescaled(points, e);
+        let c = center.map(|v| geometry::times_pow2(v, -e));
+        let err = error_sum(&pts, c, geometry::times_pow2(radius, -e).powi(2));
+        return unscale_error(err, e, None);
+    }
     Ok(error_sum(points, center, radius * radius))
 }
 
-fn error_sum(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
-    let part = |chunk: &[[f64; 3]]| -> f64 {
-        chunk
-            .iter()
-            .map(|p| {
-                let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-                (x * x + y * y + z * z - r2).abs()
-            })
-            .sum()
-    };
-    if points.len() < 2 * CHUNK {
-        part(points)
+/// The largest of `max_abs` and the magnitudes of `more`.
+fn magnitude(max_abs: f64, more: &[f64]) -> f64 {
+    more.iter().fold(max_abs, |m, v| m.max(v.abs()))
+}
+
+/// The points times `2^-e` (exact).
+fn rescaled(points: &[[f64; 3]], e: i32) -> Vec<[f64; 3]> {
+    points
+        .iter()
+        .map(|p| p.map(|v| geometry::times_pow2(v, -e)))
+        .collect()
+}
+
+/// An error sum of points scaled by `2^-e`, in the caller's units (`x 4^e`); `center` (in the
+/// caller's units) is named in the error when the sum overflows.
+fn unscale_error(err: f64, e: i32, center: Option<[f64; 3]>) -> Result<f64> {
+    let out = geometry::times_pow2(err, 2 * e);
+    if out.is_finite() {
+        Ok(out)
     } else {
-        points.par_chunks(CHUNK).map(part).sum()
+        let found = center.map_or(String::new(), |c| {
+            format!(
+                " (the centre found is [{:e}, {:e}, {:e}])",
+                c[0], c[1], c[2]
+            )
+        });
+        Err(CalError::InvalidArgument(format!(
+            "the error sum (squared distances summed over the points) is {err:.3e} x 2^{}, beyond \
+             the largest double (1.8e308){found}: divide the points, the radius and the steps by \
+             a power of ten",
+            2 * e
+        )))
     }
+}
+
+fn error_sum(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
+    if points.len() < 2 * CHUNK {
+        error_sum_serial(points, c, r2)
+    } else {
+        points
+            .par_chunks(CHUNK)
+            .map(|ch| error_sum_serial(ch, c, r2))
+            .sum()
+    }
+}
+
+/// `Σ |‖p - c‖² - r2|` on the calling thread (AVX2 + FMA when the CPU has them).
+fn error_sum_serial(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if simd::has_avx2_fma() {
+        return simd::avx2_call!(error_sum_avx2(points, c, r2));
+    }
+    error_sum_lanes::<Separate>(points, c, r2)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn error_sum_avx2(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
+    error_sum_lanes::<Fused>(points, c, r2)
+}
+
+/// Eight independent partial sums, so that the additions pipeline and vectorise.
+#[inline(always)]
+fn error_sum_lanes<A: Arith>(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
+    const L: usize = 8;
+    let mut acc = [0.0f64; L];
+    let groups = points.chunks_exact(L);
+    let rest = groups.remainder();
+    for g in groups {
+        for l in 0..L {
+            let (x, y, z) = (g[l][0] - c[0], g[l][1] - c[1], g[l][2] - c[2]);
+            acc[l] += (A::fma(z, z, A::fma(y, y, x * x)) - r2).abs();
+        }
+    }
+    let mut tail = 0.0;
+    for p in rest {
+        let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+        tail += (A::fma(z, z, A::fma(y, y, x * x)) - r2).abs();
+    }
+    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
 }
 
 /// The 26 neighbour offsets in units of the step, in a fixed order: x-major, then y, then z,
@@ -239,7 +314,7 @@ fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26
 /// assert_eq!(d.center, [10.0, 0.0, 0.0]);
 /// ```
 pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) -> Result<Descent> {
-    check_finite(points)?;
+    let scan = geometry::scan(points, true)?;
     check_positive("radius", radius)?;
     check_positive("step", opts.step)?;
     check_positive("min_step", opts.min_step)?;
@@ -249,25 +324,69 @@ pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) ->
             opts.shrink
         )));
     }
+    if opts.min_step > opts.step {
+        return Err(CalError::InvalidArgument(format!(
+            "min_step ({}) must not exceed step ({}): the descent stops once the step falls below \
+             min_step (min_step == step gives the fixed-step descent)",
+            opts.min_step, opts.step
+        )));
+    }
     if !opts.start.iter().all(|v| v.is_finite()) {
         return Err(CalError::InvalidArgument("start must be finite".into()));
     }
-    if points.len() < 4 {
+    let n = points.len();
+    if n < 4 {
         return Err(CalError::TooFewPoints {
-            got: points.len(),
+            got: n,
             need: 4,
             what: "the centre search",
         });
     }
-    check_three_dimensional(points, "centre")?;
+    // the step shrinks `levels` times at least: bound the work before starting
+    let levels = ((opts.step / opts.min_step).ln() / opts.shrink.ln()).floor() + 1.0;
+    let work = levels * n as f64;
+    if !(work <= DESCENT_WORK_LIMIT) {
+        return Err(CalError::InvalidArgument(format!(
+            "the descent would examine at least {levels:.3e} neighbourhoods (the step falls from \
+             {:e} to {:e} by a factor {} at a time) of {n} points each, {work:.2e} point \
+             evaluations, over the limit of {DESCENT_WORK_LIMIT:.0e}: use a larger shrink (the \
+             seed's is 10) or a larger min_step",
+            opts.step, opts.min_step, opts.shrink
+        )));
+    }
+    // squares of the points and the radius must stay inside double precision (a far start
+    // or a huge step only makes the first neighbourhoods infinite, which the descent leaves)
+    let m = magnitude(scan.max_abs, &[radius]);
+    if geometry::needs_rescale(m) {
+        let e = geometry::exponent(m);
+        let down = |v: f64| geometry::times_pow2(v, -e);
+        let pts = rescaled(points, e);
+        let o = DescentOptions {
+            start: opts.start.map(down),
+            step: down(opts.step),
+            min_step: down(opts.min_step).max(f64::from_bits(1)),
+            ..opts
+        };
+        let d = descend_center(&pts, down(radius), o)?;
+        let center = d.center.map(|v| geometry::times_pow2(v, e));
+        return Ok(Descent {
+            center,
+            error: unscale_error(d.error, e, Some(center))?,
+            step: geometry::times_pow2(d.step, e),
+            ..d
+        });
+    }
+    geometry::classify(&scan, n, "centre")?;
     let r2 = radius * radius;
     let mut c = opts.start;
     let mut err = error_sum(points, c, r2);
     let mut evaluations = 1;
     let mut step = opts.step;
     let mut iterations = 0;
-    let mut converged = step < opts.min_step;
-    while !converged && iterations < opts.max_iter {
+    let mut converged = false;
+    // the work limit holds at run time too (moves are not bounded in advance)
+    let cap = opts.max_iter.min((DESCENT_WORK_LIMIT / n as f64) as usize);
+    while !converged && iterations < cap {
         iterations += 1;
         let sums = neighbour_sums(points, c, r2, step);
         evaluations += 26;
@@ -294,6 +413,12 @@ pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) ->
     }
     // report the exact sum at the final centre (the neighbour sums add in another order)
     let error = error_sum(points, c, r2);
+    if !error.is_finite() {
+        return Err(CalError::InvalidArgument(format!(
+            "the error sum overflows double precision at every centre the descent reached              (start {:?}, step {}): start nearer the points (their mean, say)",
+            opts.start, opts.step
+        )));
+    }
     Ok(Descent {
         center: c,
         error,
@@ -304,8 +429,13 @@ pub fn descend_center(points: &[[f64; 3]], radius: f64, opts: DescentOptions) ->
     })
 }
 
-/// Largest number of grid nodes times points that [`grid_center`] accepts.
-pub const GRID_WORK_LIMIT: f64 = 2e11;
+/// Largest number of neighbourhoods times points that [`descend_center`] examines (about 10 s
+/// on one core in the worst case, where every point is near the sphere).
+pub const DESCENT_WORK_LIMIT: f64 = 5e8;
+
+/// Largest number of grid nodes times points that [`grid_center`] accepts (about 10 s on one
+/// core).
+pub const GRID_WORK_LIMIT: f64 = 2e10;
 
 /// Brute-force search of the cube `[lo, hi]` at `step` for the centre of a sphere of known
 /// `radius`: every node `lo + step * (i, j, k)` inside the cube is evaluated and the best
@@ -317,7 +447,7 @@ pub fn grid_center(
     hi: [f64; 3],
     step: f64,
 ) -> Result<Descent> {
-    check_finite(points)?;
+    let scan = geometry::scan(points, true)?;
     check_positive("radius", radius)?;
     check_positive("step", step)?;
     if points.is_empty() {
@@ -335,10 +465,11 @@ pub fn grid_center(
             )));
         }
         let n = ((hi[k] - lo[k]) / step * (1.0 + 1e-12)).floor() + 1.0;
-        if n * points.len() as f64 > GRID_WORK_LIMIT {
+        if !(n * points.len() as f64 <= GRID_WORK_LIMIT) {
             return Err(CalError::InvalidArgument(format!(
-                "the cube search would take too long ({n} nodes along one axis): use a larger step, \
-                 a smaller cube, or descend_center"
+                "the cube search would take too long ({n:.3e} nodes along one axis, {} points): \
+                 use a larger step, a smaller cube, or descend_center",
+                points.len()
             )));
         }
         counts[k] = n as usize;
@@ -351,6 +482,30 @@ pub fn grid_center(
             points.len()
         )));
     }
+    let m = magnitude(scan.max_abs, &[radius]);
+    if geometry::needs_rescale(m) {
+        let e = geometry::exponent(m);
+        let down = |v: f64| geometry::times_pow2(v, -e);
+        let pts = rescaled(points, e);
+        let d = grid_nodes(&pts, down(radius), lo.map(down), down(step), counts)?;
+        let center = d.center.map(|v| geometry::times_pow2(v, e));
+        return Ok(Descent {
+            center,
+            error: unscale_error(d.error, e, Some(center))?,
+            step,
+            ..d
+        });
+    }
+    grid_nodes(points, radius, lo, step, counts)
+}
+
+fn grid_nodes(
+    points: &[[f64; 3]],
+    radius: f64,
+    lo: [f64; 3],
+    step: f64,
+    counts: [usize; 3],
+) -> Result<Descent> {
     let total = counts[0] * counts[1] * counts[2];
     let r2 = radius * radius;
     let node = |idx: usize| -> [f64; 3] {
@@ -363,17 +518,7 @@ pub fn grid_center(
             lo[2] + step * k as f64,
         ]
     };
-    let eval = |idx: usize| -> (f64, usize) {
-        let c = node(idx);
-        let e: f64 = points
-            .iter()
-            .map(|p| {
-                let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-                (x * x + y * y + z * z - r2).abs()
-            })
-            .sum();
-        (e, idx)
-    };
+    let eval = |idx: usize| -> (f64, usize) { (error_sum_serial(points, node(idx), r2), idx) };
     let better = |a: (f64, usize), b: (f64, usize)| {
         if b.0 < a.0 || (b.0 == a.0 && b.1 < a.1) {
             b
@@ -385,6 +530,13 @@ pub fn grid_center(
         .into_par_iter()
         .map(eval)
         .reduce(|| (f64::INFINITY, usize::MAX), better);
+    if best == usize::MAX {
+        return Err(CalError::InvalidArgument(
+            "the error sum overflows double precision at every node: divide the points, the \
+             radius and the cube by a power of ten"
+                .into(),
+        ));
+    }
     Ok(Descent {
         center: node(best),
         error,
@@ -412,7 +564,7 @@ pub struct LinearSphere {
 /// This minimises an algebraic error, not the geometric distance: fast, one pass, and the
 /// starting point of the geometric fits.
 pub fn fit_sphere_linear(points: &[[f64; 3]]) -> Result<LinearSphere> {
-    check_finite(points)?;
+    let scan = geometry::scan(points, true)?;
     if points.len() < 4 {
         return Err(CalError::TooFewPoints {
             got: points.len(),
@@ -420,7 +572,17 @@ pub fn fit_sphere_linear(points: &[[f64; 3]]) -> Result<LinearSphere> {
             what: "a sphere fit",
         });
     }
-    let sp = check_three_dimensional(points, "sphere")?;
+    if geometry::needs_rescale(scan.max_abs) {
+        let e = geometry::exponent(scan.max_abs);
+        let f = fit_sphere_linear(&rescaled(points, e))?;
+        let up = |v: f64| geometry::times_pow2(v, e);
+        return Ok(LinearSphere {
+            center: f.center.map(up),
+            radius: up(f.radius),
+            rms: up(f.rms),
+        });
+    }
+    let sp = geometry::classify(&scan, points.len(), "sphere")?;
     let (m, s) = (sp.mean, sp.scale);
     let mut ata = Matrix4::<f64>::zeros();
     let mut atb = Vector4::<f64>::zeros();

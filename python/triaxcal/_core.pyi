@@ -55,6 +55,7 @@ def fit_ellipsoid(
     tol: float,
     method: str,
     debias: bool,
+    fixed: list[float | None] | None = None,
 ) -> dict[str, Any]: ...
 def fit_batch(
     points: _Points,
@@ -66,6 +67,7 @@ def fit_batch(
     tol: float,
     method: str,
     debias: bool,
+    fixed: list[float | None] | None = None,
 ) -> dict[str, Any]: ...
 def apply(
     points: _Points, offset: _Vec3, matrix: list[list[float]]

@@ -60,6 +60,9 @@ KNOWN_MODELS = (
     "factory",  # a maker's calibration read from a file header (GENEActiv)
 )
 
+#: The parts a calibration can have.
+SENSORS = ("accel", "gyro", "mag")
+
 #: Highest degree of the temperature polynomials (``offset_poly``/``gain_poly`` rows - 1).
 MAX_POLY_DEGREE = 3
 

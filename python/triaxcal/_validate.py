@@ -1,7 +1,11 @@
-"""Input validation shared by the public functions: array-likes in, contiguous float64 out."""
+"""Input validation shared by the public functions: array-likes in, contiguous float64 out;
+options checked, never clipped or coerced (a bad one raises :class:`CalibrationError` naming the
+option, the value and the valid range)."""
 
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Any
 
 import numpy as np
@@ -53,7 +57,9 @@ def as_samples(
     if arr.shape[0] < min_rows:
         raise CalibrationError(f"{name} needs at least {min_rows} rows, got {arr.shape[0]}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
-    if not arr.flags.aligned:  # e.g. unpickled from a network buffer: the core needs aligned
+    if not arr.flags.aligned:
+        # a view at an odd byte offset (memory maps, Arrow buffers): the compiled core needs
+        # aligned doubles, so copy -- only then
         arr = arr.copy()
     if finite and not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
@@ -86,13 +92,68 @@ def require_radius(radius: Any) -> float:
     """Return ``radius`` as a positive float; it must be given."""
     if radius is None:
         raise CalibrationError("radius is required: the magnitude calibrated readings must have")
-    try:
-        r = float(radius)
-    except (TypeError, ValueError):
+    if not _is_real(radius):
         raise CalibrationError(
             f"radius must be a number (1.0 for g, 9.80665 for m/s^2, the field in uT), got "
             f"{radius!r}"
-        ) from None
-    if not (np.isfinite(r) and r > 0):
+        )
+    r = float(radius)
+    if not (math.isfinite(r) and r > 0):
         raise CalibrationError(f"radius must be a finite number greater than zero, got {r}")
     return r
+
+
+def _is_real(value: Any) -> bool:
+    """A real number: int, float or a numpy real scalar -- not a bool, a string or complex."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def as_count(value: Any, name: str, *, lo: int = 0, hi: int) -> int:
+    """Return ``value`` as an int in ``[lo, hi]``; whole numbers only (no bool, no float)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise CalibrationError(f"{name} must be a whole number from {lo} to {hi}, got {value!r}")
+    v = int(value)
+    if not lo <= v <= hi:
+        raise CalibrationError(f"{name} must be a whole number from {lo} to {hi}, got {v}")
+    return v
+
+
+def as_real(
+    value: Any,
+    name: str,
+    *,
+    lo: float = -math.inf,
+    hi: float = math.inf,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    allow_inf: bool = False,
+) -> float:
+    """Return ``value`` as a float in the given range (closed unless ``*_open``); NaN is never
+    valid, infinities only with ``allow_inf``."""
+    left = "(" if lo_open else "["
+    right = ")" if hi_open else "]"
+    what = f"a number in {left}{lo:g}, {hi:g}{right}"
+    if not _is_real(value):
+        raise CalibrationError(f"{name} must be {what}, got {value!r}")
+    v = float(value)
+    ok = not math.isnan(v) and (allow_inf or math.isfinite(v))
+    ok = ok and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    if not ok:
+        raise CalibrationError(f"{name} must be {what}, got {v!r}")
+    return v
+
+
+def as_flag(value: Any, name: str) -> bool:
+    """Return ``value`` as a bool; only True or False (or numpy's) are accepted."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise CalibrationError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def as_choice(value: Any, name: str, choices: tuple[str, ...]) -> str:
+    """Return ``value`` if it is one of ``choices``."""
+    if not isinstance(value, str) or value not in choices:
+        raise CalibrationError(
+            f"{name} must be one of {', '.join(repr(c) for c in choices)}, got {value!r}"
+        )
+    return value

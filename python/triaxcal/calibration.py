@@ -61,7 +61,7 @@ __all__ = [
 SCHEMA_NAME = "triaxcal.calibration"
 SCHEMA_VERSION = 1
 SCHEMA = f"{SCHEMA_NAME}/{SCHEMA_VERSION}"
-SENSORS = ("accel", "gyro", "mag")
+SENSORS = _schema.SENSORS
 #: Model names a part may carry (see :mod:`triaxcal._schema`).
 KNOWN_MODELS = _schema.KNOWN_MODELS
 

@@ -17,7 +17,16 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from ._validate import as_points, as_radius, as_vector, require_radius
+from ._validate import (
+    as_choice,
+    as_count,
+    as_flag,
+    as_points,
+    as_radius,
+    as_real,
+    as_vector,
+    require_radius,
+)
 from .errors import CalibrationError
 
 __all__ = [
@@ -37,6 +46,24 @@ __all__ = [
 
 MODELS = ("sphere", "axis", "full")
 METHODS = ("lm", "gn", "algebraic")
+
+#: Most refinement steps a fit accepts (each is a pass over the points; fits take tens).
+MAX_ITER = 1_000_000
+
+#: Parameters that ``fixed`` can hold, per model, with their place in the core's vector
+#: (``gain_*`` are the ``diag_*`` of the axis and full models; the sphere's one gain is ``gain``).
+FIXABLE = {
+    "sphere": {"offset_x": 0, "offset_y": 1, "offset_z": 2, "gain": 3},
+    "axis": {
+        "offset_x": 0, "offset_y": 1, "offset_z": 2,
+        "gain_x": 3, "gain_y": 4, "gain_z": 5, "diag_x": 3, "diag_y": 4, "diag_z": 5,
+    },
+    "full": {
+        "offset_x": 0, "offset_y": 1, "offset_z": 2,
+        "gain_x": 3, "gain_y": 4, "gain_z": 5, "diag_x": 3, "diag_y": 4, "diag_z": 5,
+        "offdiag_xy": 6, "offdiag_xz": 7, "offdiag_yz": 8,
+    },
+}
 
 
 def _frozen(a: Any, dtype: Any = np.float64) -> np.ndarray:
@@ -80,6 +107,9 @@ class EllipsoidFit:
         Plain-language warnings, e.g. poor coverage of the sphere, with what to do.
     model_reason : str or None
         With ``model="auto"``: why this model was chosen (see :func:`triaxcal.select.fit_auto`).
+    fixed : tuple of str
+        Parameters held at given values (``fixed=``) instead of fitted; their standard error is
+        0.
     """
 
     model: str
@@ -95,9 +125,10 @@ class EllipsoidFit:
     n: int
     warnings: tuple[str, ...] = field(default=())
     model_reason: str | None = None
+    fixed: tuple[str, ...] = ()
 
     @classmethod
-    def _from_core(cls, d: dict) -> EllipsoidFit:
+    def _from_core(cls, d: dict, fixed: tuple[str, ...] = ()) -> EllipsoidFit:
         return cls(
             model=d["model"],
             offset=_frozen(d["offset"]),
@@ -111,6 +142,7 @@ class EllipsoidFit:
             condition=float(d["condition"]),
             n=int(d["n"]),
             warnings=tuple(d["warnings"]),
+            fixed=fixed,
         )
 
     def apply(self, points: Any) -> np.ndarray:
@@ -151,17 +183,21 @@ def fit_ellipsoid(
     tol: float = 1e-10,
     method: str = "lm",
     debias: bool = True,
+    fixed: dict[str, float] | None = None,
 ) -> EllipsoidFit:
     """Fit offset and gain matrix so that calibrated readings have constant magnitude.
 
     Minimises the geometric residual ``|matrix @ (p - offset)| - radius`` by
     Levenberg-Marquardt, started from an algebraic ellipsoid fit. Runs in Rust with the GIL
-    released; the points are streamed, not copied (float64 C-contiguous input is borrowed).
+    released; the points are streamed, not copied (aligned float64 C-contiguous input is
+    borrowed; anything else is converted first).
 
     Parameters
     ----------
     points : array_like, shape (N, 3)
-        Raw readings, any real dtype (int16 counts straight from a sensor are fine).
+        Raw readings, any real dtype (int16 counts straight from a sensor are fine). At least
+        as many as the model has free unknowns (4, 6 or 9, fewer with ``fixed``); exactly that
+        many give an exactly determined solve (a note in ``warnings``, NaN standard errors).
     model : {"full", "axis", "sphere", "auto"}
         ``"sphere"``: offset + one scale; ``"axis"``: offset + 3 gains; ``"full"``: offset +
         symmetric 3x3 (scale, cross-axis, soft iron); ``"auto"``: fit all three and keep the
@@ -170,9 +206,10 @@ def fit_ellipsoid(
         Magnitude calibrated readings must have: 1.0 for g, 9.80665 for m/s^2, 16384 for counts
         at +-2 g, the local field in uT. ``None`` keeps the data's own scale.
     max_iter : int
-        Most refinement steps.
+        Most refinement steps (0 to 1,000,000).
     tol : float
-        Converged when a step lowers the sum of squares by less than this fraction.
+        Converged when a step lowers the sum of squares by less than this fraction (0 <= tol <
+        1).
     method : {"lm", "gn", "algebraic"}
         Levenberg-Marquardt, Gauss-Newton, or the algebraic fit alone (no refinement).
     debias : bool
@@ -180,7 +217,14 @@ def fit_ellipsoid(
         the noise variance, which is estimated from the residuals). Removes the O(sigma^2)
         shrinkage of ``matrix`` that every length-based fit has; applied only where that bias
         exceeds a tenth of the statistical error (noise above 0.1/sqrt(N) of the radius).
-        ``False`` gives the plain geometric least-squares fit.
+        ``False`` gives the plain geometric least-squares fit (the objective of the seed's
+        spreadsheet: the sum of ``(|calibrated| - radius)^2``).
+    fixed : dict, optional
+        Parameters held at given values instead of fitted: ``offset_x/y/z`` (raw units) and,
+        with ``radius`` given, gains in calibrated units per raw unit: ``gain_x/y/z`` (alias
+        ``diag_x/y/z``) and ``offdiag_xy/xz/yz`` for "axis"/"full", ``gain`` for "sphere"
+        (``matrix = gain * I``). ``{"gain_z": 1.0}`` with ``radius=16384`` is the seed's
+        spreadsheet fit (offsets and the x and y gains varied, the z gain 1).
 
     Returns
     -------
@@ -190,7 +234,8 @@ def fit_ellipsoid(
     ------
     CalibrationError
         NaN/inf, too few points, points on a plane or a line, too small a cap of the sphere
-        for the model, wrong shape or dtype. The message says what to do.
+        for the model, wrong shape or dtype, an option out of range. The message says what to
+        do.
 
     Examples
     --------
@@ -201,32 +246,35 @@ def fit_ellipsoid(
     >>> fit = tc.fit_ellipsoid(raw, model="axis", radius=1.0)
     >>> np.round(fit.offset, 6).tolist(), np.round(np.diag(fit.matrix), 6).tolist()
     ([0.05, -0.03, 0.02], [1.02, 0.98, 1.01])
+
+    Six readings, one per face of a cube, with the z gain held at 1 as the seed does:
+
+    >>> faces = np.array([[16900, 40, -20], [-15800, 40, -20], [560, 16700, -20],
+    ...                   [560, -16100, -20], [560, 40, 16400], [560, 40, -16440]])
+    >>> fit = tc.fit_ellipsoid(faces, model="axis", radius=16384, fixed={"gain_z": 1.0})
+    >>> np.round(fit.offset, 1).tolist(), np.round(np.diag(fit.matrix), 4).tolist()
+    ([550.0, 299.4, -20.0], [1.002, 0.999, 1.0])
     """
     if model == "auto":
         from .select import fit_auto  # select builds on this module
 
         auto = fit_auto(
-            points, radius=radius, max_iter=max_iter, tol=tol, method=method, debias=debias
+            points, radius=radius, max_iter=max_iter, tol=tol, method=method, debias=debias,
+            fixed=fixed,
         )
         return replace(auto.fit, model_reason=auto.reason)
-    max_iter, r = _check_options(model, method, max_iter, radius, auto_ok=True)
+    opts = _check_options(model, method, max_iter, radius, tol, debias, auto_ok=True)
+    fix, names = _fixed_vector(fixed, model, opts["radius"])
     pts = as_points(points)
-    d = _core.fit_ellipsoid(
-        pts,
-        model=model,
-        radius=r,
-        max_iter=max_iter,
-        tol=float(tol),
-        method=method,
-        debias=bool(debias),
-    )
-    return EllipsoidFit._from_core(d)
+    d = _core.fit_ellipsoid(pts, **opts, fixed=fix)
+    return EllipsoidFit._from_core(d, names)
 
 
 def fit_sphere(
     points: Any,
     *,
     radius: float | None = None,
+    scale: str = "free",
     max_iter: int = 100,
     tol: float = 1e-10,
     debias: bool = True,
@@ -235,9 +283,35 @@ def fit_sphere(
 
     With ``radius`` given, ``matrix`` is ``radius / data_radius`` times the identity; without
     it, ``matrix`` is the identity and ``radius`` is the data's own.
+
+    ``scale="fixed"`` (needs ``radius``) fits only the centre: Gauss-Newton /
+    Levenberg-Marquardt on ``|p - center| - radius`` with ``matrix`` the identity, i.e. the
+    readings are taken to lie on a sphere of exactly ``radius`` raw units (16384 counts for an
+    accelerometer at +-2 g). A known radius determines the centre from a part of the sphere (a
+    cap), where a free scale cannot be told from the centre's distance.
+
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> t = np.radians(np.arange(0, 360, 30))
+    >>> cap = np.c_[np.cos(t) * 8192, np.sin(t) * 8192, np.full(12, 14189.0)]  # 30 deg cap
+    >>> cap = np.r_[cap, [[0, 0, 16384]]] + [120, -40, 300]                   # offset in counts
+    >>> fit = tc.fit_sphere(cap, radius=16384, scale="fixed")
+    >>> np.round(fit.offset).tolist(), fit.matrix.tolist() == np.eye(3).tolist()
+    ([120.0, -40.0, 300.0], True)
     """
+    as_choice(scale, "scale", ("free", "fixed"))
+    fixed = None
+    if scale == "fixed":
+        if radius is None:
+            raise CalibrationError(
+                "scale='fixed' needs radius: the radius of the sphere the readings lie on, in "
+                "raw units (16384 counts at +-2 g)"
+            )
+        fixed = {"gain": 1.0}
     return fit_ellipsoid(
-        points, model="sphere", radius=radius, max_iter=max_iter, tol=tol, debias=debias
+        points, model="sphere", radius=radius, max_iter=max_iter, tol=tol, debias=debias,
+        fixed=fixed,
     )
 
 
@@ -295,6 +369,7 @@ def fit_batch(
     tol: float = 1e-10,
     method: str = "lm",
     debias: bool = True,
+    fixed: dict[str, float] | None = None,
 ) -> BatchFit:
     """Fit many data sets in one call, in parallel (rayon), with the GIL released.
 
@@ -302,7 +377,7 @@ def fit_batch(
     ----------
     sets : array_like (B, N, 3), or a sequence of (Ni, 3) arrays
         One set of raw readings per device.
-    model, radius, max_iter, tol, method, debias
+    model, radius, max_iter, tol, method, debias, fixed
         As for :func:`fit_ellipsoid`, applied to every set.
 
     Returns
@@ -312,7 +387,8 @@ def fit_batch(
         ``converged`` (B,), ``iterations`` (B,), ``errors`` (B,). One bad set reports its own
         error and does not spoil the others.
     """
-    max_iter, r = _check_options(model, method, max_iter, radius, auto_ok=False)
+    opts = _check_options(model, method, max_iter, radius, tol, debias, auto_ok=False)
+    fix, _ = _fixed_vector(fixed, model, opts["radius"])
     if isinstance(sets, np.ndarray) and sets.ndim == 3:
         if sets.shape[2] != 3:
             raise CalibrationError(f"sets must have shape (B, N, 3), got {sets.shape}")
@@ -329,16 +405,7 @@ def fit_batch(
         bounds = np.zeros(len(parts) + 1, dtype=np.int64)
         bounds[1:] = np.cumsum([len(p) for p in parts])
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
-    d = _core.fit_batch(
-        flat,
-        bounds,
-        model=model,
-        radius=r,
-        max_iter=max_iter,
-        tol=float(tol),
-        method=method,
-        debias=bool(debias),
-    )
+    d = _core.fit_batch(flat, bounds, **opts, fixed=fix)
     for k in ("offsets", "matrices", "radii", "rms", "converged", "iterations"):
         d[k].setflags(write=False)
     return BatchFit(
@@ -409,48 +476,98 @@ def descend_center(
     From ``start``, look at the 26 neighbours one ``step`` away; move to the best if it lowers
     :func:`sphere_error`, otherwise divide ``step`` by ``shrink``; stop once ``step`` falls
     below ``min_step``. ``min_step=step`` gives the fixed-step descent. Defaults are the seed's
-    (raw counts: step 1000 down to 0.01).
+    (raw counts: step 1000 down to 0.01). The work is bounded before the search starts: a
+    search whose steps alone would need more than ``5e8`` point evaluations (neighbourhoods
+    times points; e.g. ``shrink=1.0001`` down to ``min_step=1e-300``) is refused with a
+    message, and a search that keeps moving stops there with ``converged=False``.
     """
     r = require_radius(radius)
+    step = as_real(step, "step", lo=0, lo_open=True)
+    min_step = as_real(min_step, "min_step", lo=0, hi=step, lo_open=True)
+    shrink = as_real(shrink, "shrink", lo=1, lo_open=True)
     d = _core.descend_center(
         as_points(points),
         r,
         start=as_vector(start, "start"),
-        step=float(step),
-        min_step=float(min_step),
-        shrink=float(shrink),
-        max_iter=_as_count(max_iter, "max_iter"),
+        step=step,
+        min_step=min_step,
+        shrink=shrink,
+        max_iter=as_count(max_iter, "max_iter", hi=10**12),
     )
     return Descent._from_core(d)
 
 
 def grid_center(points: Any, radius: float, *, lo: Any, hi: Any, step: float) -> Descent:
-    """Brute-force search of the cube ``[lo, hi]`` (scalars or 3-vectors) at ``step``."""
+    """Brute-force search of the cube ``[lo, hi]`` (scalars or 3-vectors) at ``step``.
+
+    Nodes times points may not exceed ``2e10`` (about ten seconds on one core): a larger
+    search is refused before it starts, with a message saying so.
+    """
     r = require_radius(radius)
     d = _core.grid_center(
-        as_points(points), r, lo=as_vector(lo, "lo"), hi=as_vector(hi, "hi"), step=float(step)
+        as_points(points),
+        r,
+        lo=as_vector(lo, "lo"),
+        hi=as_vector(hi, "hi"),
+        step=as_real(step, "step", lo=0, lo_open=True),
     )
     return Descent._from_core(d)
 
 
 def _check_options(
-    model: str, method: str, max_iter: Any, radius: Any, *, auto_ok: bool
-) -> tuple[int, float | None]:
-    """Validate the options shared by the fits; returns (max_iter, radius)."""
-    if model not in MODELS:
+    model: Any, method: Any, max_iter: Any, radius: Any, tol: Any, debias: Any, *, auto_ok: bool
+) -> dict[str, Any]:
+    """Validate the options shared by the fits; returns the core's keyword arguments."""
+    if not isinstance(model, str) or model not in MODELS:
         raise CalibrationError(
             f"unknown model {model!r}: use 'sphere' (offset only), 'axis' (offset + 3 gains), "
             "'full' (offset + symmetric 3x3 matrix)" + (" or 'auto'" if auto_ok else "")
         )
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise CalibrationError(f"unknown method {method!r}: use one of {METHODS}")
-    return _as_count(max_iter, "max_iter"), as_radius(radius)
+    return {
+        "model": model,
+        "radius": as_radius(radius),
+        "max_iter": as_count(max_iter, "max_iter", hi=MAX_ITER),
+        "tol": as_real(tol, "tol", lo=0, hi=1, hi_open=True),
+        "method": method,
+        "debias": as_flag(debias, "debias"),
+    }
 
 
-def _as_count(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-        raise CalibrationError(f"{name} must be a whole number >= 0, got {value!r}")
-    return int(value)
+def _fixed_vector(
+    fixed: Any, model: str, radius: float | None
+) -> tuple[list[float | None] | None, tuple[str, ...]]:
+    """``fixed`` as the core's 9-vector (None: free), and the names given."""
+    if fixed is None or (isinstance(fixed, dict) and not fixed):
+        return None, ()
+    if not isinstance(fixed, dict):
+        raise CalibrationError(
+            f"fixed must be a dict of parameter name -> value, got {type(fixed).__name__}"
+        )
+    names = FIXABLE[model]
+    out: list[float | None] = [None] * 9
+    for name, value in fixed.items():
+        if name not in names:
+            raise CalibrationError(
+                f"cannot fix {name!r} in the {model!r} model: choose from "
+                + ", ".join(sorted(names))
+            )
+        i = names[name]
+        if out[i] is not None:
+            raise CalibrationError(f"{name!r} is given twice in fixed (an alias of the other)")
+        gain = i >= 3
+        if gain and radius is None:
+            raise CalibrationError(
+                f"fixing {name!r} needs radius: a gain is in calibrated units per raw unit, so "
+                "give the magnitude calibrated readings must have (radius=16384 for counts at "
+                "+-2 g, 1.0 for g)"
+            )
+        positive = 3 <= i <= 5
+        out[i] = as_real(value, f"fixed[{name!r}]", lo=0, lo_open=positive) if positive else (
+            as_real(value, f"fixed[{name!r}]")
+        )
+    return out, tuple(fixed)
 
 
 def _as_sequence(sets: Any) -> Sequence[Any]:

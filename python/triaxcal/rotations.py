@@ -152,16 +152,15 @@ class Alignment:
     stats: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        from .calibration import SENSORS
-
         r = _schema.reals(self.rotation, (3, 3), "alignment.rotation")
         if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) <= 0:
             raise CalibrationError(
                 "alignment.rotation must be a proper rotation (orthonormal rows, determinant "
                 f"+1), got {r.tolist()}; a mirrored axis is a sign error in the readings")
         object.__setattr__(self, "rotation", r)
-        if self.to not in SENSORS:
-            raise CalibrationError(f"alignment.to must be one of {SENSORS}, got {self.to!r}")
+        if self.to not in _schema.SENSORS:
+            raise CalibrationError(
+                f"alignment.to must be one of {_schema.SENSORS}, got {self.to!r}")
         if self.mounting is not None:
             _schema.text(64, nonblank=True)(self.mounting, "alignment.mounting")
             m = mounting(self.mounting)

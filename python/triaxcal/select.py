@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_points
+from ._validate import as_choice, as_count, as_points, as_real
 from .errors import CalibrationError
-from .fit import MODELS, EllipsoidFit, fit_ellipsoid
+from .fit import FIXABLE, MODELS, EllipsoidFit, fit_ellipsoid
 
 __all__ = ["AutoFit", "RobustFit", "fit_auto", "fit_robust", "information_criterion"]
 
@@ -40,11 +40,12 @@ def information_criterion(fit: EllipsoidFit, points: Any, criterion: str = "bic"
 
     Lower is better. ``BIC = n ln(RSS / n) + k ln(n)``; ``AIC = n ln(RSS / n) + 2 k``.
     """
+    as_choice(criterion, "criterion", ("bic", "aic"))
     pts = as_points(points)
     res = np.linalg.norm(fit.apply(pts), axis=1) / fit.radius - 1.0
     n = len(res)
     rss = max(float(res @ res), 1e-300)
-    k = N_PARAMS.get(fit.model, 9)
+    k = N_PARAMS.get(fit.model, 9) - len(fit.fixed)  # free parameters only
     if criterion == "bic":
         pen = k * math.log(n)
     elif criterion == "aic":
@@ -117,12 +118,23 @@ def fit_auto(
     'axis'
     """
     pts = as_points(points)
-    if not models or any(m not in MODELS for m in models):
+    as_choice(criterion, "criterion", ("bic", "aic"))
+    if (
+        isinstance(models, str)
+        or not isinstance(models, (tuple, list))
+        or not models
+        or any(not isinstance(m, str) or m not in MODELS for m in models)
+    ):
         raise CalibrationError(f"models must be chosen from {MODELS}, got {models!r}")
     fits: dict[str, EllipsoidFit] = {}
     scores: dict[str, float] = {}
     errors: dict[str, str] = {}
+    fixed = kwargs.get("fixed") or {}
     for m in models:
+        if any(name not in FIXABLE[m] for name in fixed):
+            # e.g. gain_z in the sphere model: that model cannot honour the request
+            errors[m] = f"cannot fix {', '.join(sorted(set(fixed) - set(FIXABLE[m])))}"
+            continue
         try:
             f = fit_ellipsoid(pts, model=m, radius=radius, **kwargs)
         except CalibrationError as exc:
@@ -244,16 +256,12 @@ def fit_robust(
         The fit and the rejected indices.
     """
     pts = as_points(points)
-    if model != "auto" and model not in MODELS:
+    if not isinstance(model, str) or (model != "auto" and model not in MODELS):
         raise CalibrationError(f"unknown model {model!r}: use one of {MODELS + ('auto',)}")
-    if lengths not in ("calibrated", "raw"):
-        raise CalibrationError(f"lengths must be 'calibrated' or 'raw', got {lengths!r}")
-    if isinstance(max_rounds, bool) or not isinstance(max_rounds, (int, np.integer)) \
-            or max_rounds < 0:
-        raise CalibrationError(f"max_rounds must be a whole number >= 0, got {max_rounds!r}")
-    sigma = float(sigma)
-    if not (sigma >= 0):
-        raise CalibrationError(f"sigma must be >= 0, got {sigma}")
+    as_choice(lengths, "lengths", ("calibrated", "raw"))
+    max_rounds = as_count(max_rounds, "max_rounds", hi=1000)
+    sigma = as_real(sigma, "sigma", lo=0, allow_inf=True)
+    min_keep = as_real(min_keep, "min_keep", lo=0, hi=1)
     n = len(pts)
     keep = np.ones(n, dtype=bool)
     off = sigma == 0 or math.isinf(sigma) or max_rounds == 0

@@ -16,7 +16,8 @@ use numpy::{
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// Borrows an (N, 3) C-contiguous float64 array as points, without copying.
+/// Borrows an (N, 3) aligned, C-contiguous float64 array as points, without copying. (The
+/// Python facade converts anything else first: `triaxcal._validate.as_points`.)
 fn points<'a>(arr: &'a PyReadonlyArray2<'_, f64>) -> PyResult<&'a [[f64; 3]]> {
     let shape = arr.shape();
     if shape[1] != 3 {
@@ -25,9 +26,16 @@ fn points<'a>(arr: &'a PyReadonlyArray2<'_, f64>) -> PyResult<&'a [[f64; 3]]> {
             shape[1]
         )));
     }
-    let flat = arr.as_slice().map_err(|_| {
-        CalibrationError::new_err("points must be C-contiguous (np.ascontiguousarray)")
-    })?;
+    let not_c = || {
+        CalibrationError::new_err(
+            "points must be an aligned, C-contiguous float64 array: call the triaxcal \
+             functions, which convert any array, rather than triaxcal._core",
+        )
+    };
+    if !arr.is_c_contiguous() {
+        return Err(not_c());
+    }
+    let flat = arr.as_slice().map_err(|_| not_c())?;
     let (chunks, _) = flat.as_chunks::<3>();
     Ok(chunks)
 }
@@ -70,10 +78,12 @@ fn options(
     tol: f64,
     method: &str,
     debias: bool,
+    fixed: Option<[Option<f64>; 9]>,
 ) -> PyResult<FitOptions> {
     Ok(FitOptions {
         debias,
         diagnostics: true,
+        fixed: fixed.unwrap_or([None; 9]),
         model: py_result(Model::parse(model))?,
         radius,
         max_iter,
@@ -149,7 +159,7 @@ fn fit_sphere_linear(
 
 /// Geometric ellipsoid fit; returns a dict of plain values.
 #[pyfunction]
-#[pyo3(signature = (points, *, model, radius, max_iter, tol, method, debias))]
+#[pyo3(signature = (points, *, model, radius, max_iter, tol, method, debias, fixed=None))]
 fn fit_ellipsoid<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
@@ -159,9 +169,10 @@ fn fit_ellipsoid<'py>(
     tol: f64,
     method: &str,
     debias: bool,
+    fixed: Option<[Option<f64>; 9]>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let pts = self::points(&points)?;
-    let opts = options(model, radius, max_iter, tol, method, debias)?;
+    let opts = options(model, radius, max_iter, tol, method, debias, fixed)?;
     let f = py_result(py.detach(|| ellipsoid::fit_ellipsoid(pts, &opts)))?;
     fit_dict(py, f)
 }
@@ -169,7 +180,7 @@ fn fit_ellipsoid<'py>(
 /// Fits many sets: `points` holds them back to back, set i is rows `bounds[i]..bounds[i+1]`.
 /// Returns (offsets (B,3), matrices (B,9), radii, rms, converged, iterations, errors).
 #[pyfunction]
-#[pyo3(signature = (points, bounds, *, model, radius, max_iter, tol, method, debias))]
+#[pyo3(signature = (points, bounds, *, model, radius, max_iter, tol, method, debias, fixed=None))]
 fn fit_batch<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
@@ -180,12 +191,14 @@ fn fit_batch<'py>(
     tol: f64,
     method: &str,
     debias: bool,
+    fixed: Option<[Option<f64>; 9]>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let pts = self::points(&points)?;
     let b = bounds
         .as_slice()
         .map_err(|_| CalibrationError::new_err("bounds must be contiguous"))?;
-    let opts = options(model, radius, max_iter, tol, method, debias)?;
+    let mut opts = options(model, radius, max_iter, tol, method, debias, fixed)?;
+    opts.diagnostics = false; // a batch reports no warnings
     let mut sets = Vec::with_capacity(b.len().saturating_sub(1));
     for w in b.windows(2) {
         let (lo, hi) = (w[0], w[1]);

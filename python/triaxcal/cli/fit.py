@@ -20,6 +20,7 @@ its model, is not written: the command exits with status 2 and says what to reco
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import sys
 from dataclasses import dataclass, field
@@ -172,11 +173,35 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="also compute 95 %% bootstrap intervals of every coefficient from N "
                         "refits (e.g. 1000, fixed seed), stored in the calibration, shown by "
                         "report and used by diff")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold a parameter at a value instead of fitting it (repeatable): "
+                        "offset_x/y/z in raw units, gain_x/y/z (or gain for the sphere model) "
+                        "in calibrated units per raw unit -- with --radius 16384 a gain of 1 "
+                        "means unchanged counts, as in the seed's spreadsheet (--fix gain_z=1)")
     add_pose_options(p)
     p.add_argument("--skip-bad-lines", action="store_true",
                    help="skip lines of the data file that are not a row of numbers (and count "
                         "them) instead of stopping at the first one")
     add_source_options(p)
+
+
+def parse_fix(items: list[str] | None) -> dict[str, float] | None:
+    """``["gain_z=1", ...]`` from ``--fix`` to ``{"gain_z": 1.0}`` (None when empty)."""
+    if not items:
+        return None
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not sep or not name.strip() or not math.isfinite(number):
+            raise CalibrationError(
+                f"--fix {item!r}: give NAME=VALUE with a finite number, e.g. --fix gain_z=1"
+            )
+        out[name.strip()] = number
+    return out
 
 
 @dataclass
@@ -264,7 +289,8 @@ def fit_file(args: argparse.Namespace, *, table: Table | None = None) -> FitOutc
                                    "with --sensor mag")
         fitted = apply_asa(pts, args.asa)  # adjusted before fitting, folded back below
     rob = fit_robust(fitted, model=args.model, radius=radius, sigma=args.sigma,
-                     max_rounds=args.rounds, lengths=args.reject_on)
+                     max_rounds=args.rounds, lengths=args.reject_on,
+                     fixed=parse_fix(getattr(args, "fix", None)))
     extra: dict[str, Any] = {
         "columns": src.columns,
         "poses": bool(args.poses),
