@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from ..errors import CalibrationError
 from ..io.board_poses import BoardPoseSettings
@@ -28,8 +29,13 @@ counts: --counts-per-g, default 16384, turns --accel-threshold into counts; --gy
 auto is the firmware's 393 counts = 3 deg/s; --rate-hz sets its sample rate, default 100).
 triaxcal fit takes such rows as the poses they are.
 
+With --live, a page in the browser (http://127.0.0.1:8765 by default) shows the readings
+filling the sphere in 3D, the running fit with its standard errors, MotionCal's four quality
+numbers and the stream's health, with buttons to save, export and send the calibration.
+
 examples:
   triaxcal capture --port /dev/ttyUSB0 --protocol framed --poses 30 --out s.csv
+  triaxcal capture --port /dev/ttyACM0 --protocol framed --live --out s.csv
   triaxcal capture --port /dev/ttyACM0 --protocol framed --channels 7 --board-poses \
       --holdoff 2 --poses 84 --out globe.csv
   triaxcal capture --port /dev/ttyACM0 --protocol binary --channels 7 --out s.csv
@@ -58,6 +64,31 @@ def _request_byte(text: str) -> bytes:
         return parse_request_byte(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _http_port(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from None
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number 0..65535, got {v}")
+    return v
+
+
+def add_live_options(p: argparse.ArgumentParser) -> None:
+    """``--live``, ``--http-host``, ``--http-port``, ``--no-browser`` (capture and demo)."""
+    g = p.add_argument_group("live page (needs: pip install 'triaxcal[live]')")
+    g.add_argument("--live", action="store_true",
+                   help="serve a live page while capturing: the readings in 3D, coverage, the "
+                        "running fit, quality numbers, stream health, Save/Export/Send buttons")
+    g.add_argument("--http-host", default="127.0.0.1", metavar="HOST",
+                   help="address of the live page (default 127.0.0.1: this machine only; "
+                        "0.0.0.0 shows the data to the whole network)")
+    g.add_argument("--http-port", type=_http_port, default=8765, metavar="PORT",
+                   help="port of the live page (default 8765; the next free one if taken)")
+    g.add_argument("--no-browser", action="store_true",
+                   help="do not open the live page in the default browser")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -119,6 +150,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
     add_pose_options(p)
+    add_live_options(p)
     p.set_defaults(func=run)
 
 
@@ -152,6 +184,10 @@ def board_settings(args: argparse.Namespace) -> BoardPoseSettings:
 def run(args: argparse.Namespace) -> int:
     if args.poll_hz is not None and not args.poll_hz > 0:
         raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
+    if args.live:
+        from ..live.server import check_live_extra
+
+        check_live_extra()  # before the port is opened: say what to install first
     channels = args.channels
     board = None
     if args.board_poses:
@@ -163,6 +199,14 @@ def run(args: argparse.Namespace) -> int:
     elif channels is None and args.protocol != "raw":
         channels = 10
     args.board_settings = board
+    if args.live and board is not None:
+        raise CalibrationError(
+            "--live shows the readings as they stream; with --board-poses the board sends only "
+            "its pose means: drop one of the two")
+    if args.live and (args.out_dir is not None or len(args.port) > 1):
+        raise CalibrationError(
+            "--live shows one board: capture one --port into --out SESSION.csv with it, or "
+            "drop --live for a capture of several boards")
     if args.out_dir is not None or len(args.port) > 1:
         from ._multicapture import run_many
 
@@ -198,18 +242,21 @@ def run(args: argparse.Namespace) -> int:
             f"{len(names)} channels ({' '.join(names)}) -> {args.out}; Ctrl-C stops",
             file=out,
         )
-    result = capture(
-        reader,
-        args.out,
-        samples=args.samples,
-        poses=args.poses,
-        duration_s=args.seconds,
-        mode=mode,
-        columns=names,
-        detection=settings_from_args(args),
-        progress=None if args.quiet else out,
-        bell=not args.no_bell,
-    )
+    kwargs: dict[str, Any] = {"samples": args.samples, "poses": args.poses,
+                              "duration_s": args.seconds, "bell": not args.no_bell}
+    detection = settings_from_args(args)
+    if args.live:
+        from ..live import LiveOptions
+        from ..live.run import live_capture
+
+        result = live_capture(
+            reader, args.out, columns=names, mode=mode, detection=detection,
+            options=LiveOptions(detection=detection),
+            host=args.http_host, port=args.http_port, open_browser=not args.no_browser,
+            progress=None if args.quiet else out, notices=out, **kwargs)
+    else:
+        result = capture(reader, args.out, mode=mode, columns=names, detection=detection,
+                         progress=None if args.quiet else out, **kwargs)
     st = result.stats
     d = st.decoder
     why = {"interrupt": "stopped by Ctrl-C", "samples": "sample count reached",

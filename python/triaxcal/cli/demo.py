@@ -29,12 +29,13 @@ from ..coverage import coverage, coverage_warning
 from ..errors import CalibrationError
 from ..export import write_outputs
 from ..fit import EllipsoidFit, fit_ellipsoid
-from ..io.capture import CaptureResult, capture, read_session
+from ..io.capture import CaptureResult, capture, channel_names, read_session
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
 from ..poses import PoseSettings, session_poses
-from ..sim import GYRO_COUNTS_PER_DPS, SensorTruth, SimDevice, SimIMU, globe_script
+from ..sim import GYRO_COUNTS_PER_DPS, Script, SensorTruth, SimDevice, SimIMU, globe_script
 from ._poses import add_pose_options, default_settings, settings_from_args
+from .capture import add_live_options
 
 HELP = "capture from a simulated board, calibrate it, and compare with the truth"
 
@@ -60,22 +61,45 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", default="framed", choices=PROTOCOLS,
                    help="wire protocol between the simulated board and the host, streamed "
                         "(default framed)")
-    p.add_argument("--speed", type=float, default=40.0,
-                   help="simulated seconds per real second (default 40)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="simulated seconds per real second (default 40; 5 with --live, so "
+                        "that the sphere fills in about 40 s)")
     p.add_argument("--seed", type=int, default=1, help="seed of the simulated sensor (default 1)")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
     add_pose_options(p)
+    add_live_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.speed is None:
+        args.speed = 5.0 if args.live else 40.0
     if not args.speed > 0:
         raise CalibrationError(f"--speed must be > 0, got {args.speed}")
+    live = None
+    if args.live:
+        from ..live.server import check_live_extra
+
+        check_live_extra()
+        live = {"host": args.http_host, "port": args.http_port,
+                "open_browser": not args.no_browser}
     result = run_demo(out, protocol=args.protocol, speed=args.speed, seed=args.seed,
                       progress=None if args.quiet else sys.stderr, plot=not args.no_plot,
-                      detection=settings_from_args(args))
+                      detection=settings_from_args(args), live=live)
+    page = result.pop("live_page", None)
+    try:
+        _print_result(args, result)
+        if page is not None:
+            page.linger()
+    finally:
+        if page is not None:
+            page.close()
+    return 0
+
+
+def _print_result(args: argparse.Namespace, result: dict[str, Any]) -> None:
     print(result["table"])
     print(f"session: {result['session']}\nresults: {result['results']}")
     for kind, path in result["outputs"].items():
@@ -85,7 +109,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot and not any(k.startswith("figure_") for k in result["outputs"]):
         print("report figures skipped: matplotlib is not installed "
               "(pip install 'triaxcal[plot]')")
-    return 0
 
 
 def run_demo(
@@ -97,6 +120,7 @@ def run_demo(
     progress: Any = None,
     plot: bool = True,
     detection: PoseSettings | None = None,
+    live: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run the demo into folder ``out``; returns the results dict (also in results.json).
 
@@ -105,22 +129,65 @@ def run_demo(
     quality report per sensor (``report_<sensor>.txt`` and, with ``plot``, ``.png``).
     ``detection``: the pose options (default: the command line's defaults), used by the
     capture and by the detection on the saved session alike.
+
+    ``live`` (``{"host", "port", "open_browser"}``) serves the live page during the capture
+    (:class:`triaxcal.live.LivePage`, fitting the magnetometer to the simulated field; its
+    buttons write into ``out/live``); the page, still serving, is returned as
+    ``results["live_page"]``: close it when done.
     """
     settings = detection if detection is not None else default_settings()
     t_start = time.monotonic()
     imu = SimIMU(seed)
     script = globe_script(hold_s=1.0, seed=seed)
+    if live is not None:
+        # the globe leaves the magnetometer's sphere unevenly covered (MotionCal's wobble
+        # stays red): end with a tumble through 30 random orientations, as a user would
+        script = script + tumble_script(30, seed=seed)
     session = out / "session.csv"
     channels = None if protocol == "raw" else 10
     with SimDevice(imu, script, rate_hz=RATE_HZ, speed=speed, loop=False, seed=seed) as dev:
         reader = SerialReader(dev.port, protocol=protocol, channels=channels, stream=True)
         if progress is not None:
             print(f"triaxcal demo: simulated board on {dev.port} ({dev.pty_path}), "
-                  f"{len(script)} poses of the globe scheme, {protocol} protocol, "
+                  f"{len(script)} poses of the globe scheme"
+                  + (" and a tumble" if live is not None else "") + f", {protocol} protocol, "
                   f"{speed:g}x real time", file=progress)
-        cap = capture(reader, session, stop=dev.finished, mode="overwrite", bell=False,
-                      progress=progress, handle_sigint=False, detection=settings)
+        page = None
+        if live is not None:
+            from ..live import LiveOptions
+            from ..live.run import LivePage
+
+            page = LivePage(reader, session, columns=channel_names(protocol, channels),
+                            options=LiveOptions(mag_radius=f"{imu.truth.field_ut:g}uT",
+                                                out_dir=out / "live", detection=settings),
+                            host=live["host"], port=live["port"],
+                            open_browser=live["open_browser"], progress=progress,
+                            mode="overwrite").start()
+            try:
+                cap = page.capture(stop=dev.finished, bell=False, handle_sigint=False,
+                                   detection=settings)
+            except BaseException:
+                page.close()
+                raise
+        else:
+            cap = capture(reader, session, stop=dev.finished, mode="overwrite", bell=False,
+                          progress=progress, handle_sigint=False, detection=settings)
     t_capture = time.monotonic() - t_start
+    try:
+        results = _analyse(out, session, protocol, speed, seed, plot, imu, dev, cap, t_start,
+                           t_capture, settings)
+    except BaseException:
+        if page is not None:
+            page.close()
+        raise
+    if page is not None:
+        results["live_page"] = page
+    return results
+
+
+def _analyse(out: Path, session: Path, protocol: str, speed: float, seed: int, plot: bool,
+             imu: SimIMU, dev: SimDevice, cap: CaptureResult, t_start: float,
+             t_capture: float, settings: PoseSettings) -> dict[str, Any]:
 
     columns, data = read_session(session)
     values = data[:, 1:]
@@ -234,6 +301,18 @@ def run_demo(
     results["results"] = str(path)
     results["table"] = table
     return results
+
+
+def tumble_script(n: int, *, seed: int = 0, hold_s: float = 0.5) -> Script:
+    """``n`` orientations drawn uniformly at random (unit quaternions), held ``hold_s`` each."""
+    q = np.random.default_rng([seed, 7]).normal(size=(n, 4))
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    rot = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)
+    return Script.from_poses(rot, hold_s=hold_s, settle_s=0.0)
 
 
 _PARAM_CELL = {"diag_x": (0, 0), "diag_y": (1, 1), "diag_z": (2, 2),

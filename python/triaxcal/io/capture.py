@@ -29,7 +29,7 @@ import stat
 import sys
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO, TextIO
@@ -429,6 +429,7 @@ def capture(
     progress: TextIO | None = sys.stderr,
     bell: bool = True,
     handle_sigint: bool = True,
+    on_records: Callable[[list[Record]], None] | None = None,
 ) -> CaptureResult:
     """Capture records from ``reader`` into the session CSV ``out`` until told to stop.
 
@@ -467,6 +468,10 @@ def capture(
         Ring the terminal bell (``\\a``) on each registered pose.
     handle_sigint : bool
         Turn the first Ctrl-C into a clean stop (main thread only).
+    on_records : callable(records), optional
+        Called in the capture loop with every non-empty batch of records, right after they
+        were written to the session (the live page, :mod:`triaxcal.live`, watches the stream
+        this way). It must return quickly; an exception it raises ends the capture.
 
     Returns
     -------
@@ -530,6 +535,8 @@ def capture(
                 if samples is not None:
                     recs = recs[: samples - writer.rows]
                 writer.write(recs)
+                if recs and on_records is not None:
+                    on_records(recs)
                 if recs and live is not None:
                     for p in live.update(recs):
                         if poses is None or len(registered) < poses:

@@ -202,6 +202,12 @@ class SerialReader:
         each record is then one pose, ``(*means, n)`` (:class:`~triaxcal.io.board_poses.
         BoardPoseDecoder`, whose ``status`` and ``settings`` say what the board reports).
 
+    Attributes
+    ----------
+    on_bytes : callable(bytes) or None
+        Called (in the reading thread) with every chunk of bytes read, before decoding; the
+        live page listens this way for a board's ``Cal1:``/``Cal2:`` echo while streaming.
+
     Examples
     --------
     >>> from triaxcal.sim import SimDevice
@@ -268,6 +274,7 @@ class SerialReader:
         self.reconnect = bool(reconnect)
         self.reconnect_timeout_s = reconnect_timeout_s
         self.on_event = on_event
+        self.on_bytes: Callable[[bytes], None] | None = None
         self.stats = ReaderStats(decoder=self.decoder.stats)
         self._port: serial.Serial | None = None
         self._disconnected_at: float | None = None
@@ -446,7 +453,26 @@ class SerialReader:
             return []
         return [Record(t, recs[0])]
 
+    def write(self, data: bytes) -> None:
+        """Write ``data`` to the board (e.g. a MotionCal packet) while reading goes on.
+
+        Safe to call from another thread than the one reading. Raises :class:`CaptureError`
+        when the port is not open or the cable is pulled.
+        """
+        port = self._port
+        if port is None or self._disconnected_at is not None:
+            raise CaptureError(
+                f"{self.port_name} is not connected: plug the board in and try again"
+            )
+        try:
+            port.write(bytes(data))
+            port.flush()
+        except _PORT_ERRORS as exc:
+            raise CaptureError(f"writing to {self.port_name} failed: {exc}") from None
+
     def _seen(self, data: bytes) -> None:
+        if data and self.on_bytes is not None:
+            self.on_bytes(data)
         self._bytes_since_record += len(data)
         if len(self._first_bytes) < 32:
             self._first_bytes += data[: 32 - len(self._first_bytes)]
