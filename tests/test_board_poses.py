@@ -29,8 +29,9 @@ from triaxcal.io.board_poses import (
     encode_settings_frame,
     encode_status_frame,
 )
-from triaxcal.io.capture import POSE_N_COLUMN, read_session
+from triaxcal.io.capture import read_session
 from triaxcal.io.protocol import FramedDecoder, crc16_ccitt, encode_framed
+from triaxcal.poses import POSE_N_COLUMN
 
 K = 7
 

@@ -30,7 +30,7 @@ import serial
 import triaxcal
 from triaxcal.cli import main
 from triaxcal.io.board_poses import BoardPoseDecoder, BoardPoseSettings
-from triaxcal.io.capture import POSE_N_COLUMN, capture, read_session
+from triaxcal.io.capture import capture, read_session
 from triaxcal.io.motioncal import encode_motioncal, parse_motioncal_echo
 from triaxcal.io.protocol import (
     BinaryDecoder,
@@ -39,6 +39,7 @@ from triaxcal.io.protocol import (
     TextDecoder,
 )
 from triaxcal.io.serial import SerialReader
+from triaxcal.poses import POSE_N_COLUMN
 
 pytestmark = pytest.mark.qemu
 

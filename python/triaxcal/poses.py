@@ -24,8 +24,14 @@ import numpy as np
 from .detect import PoseDetection, PoseDetector, detect_poses
 from .errors import CalibrationError
 
+#: Last column of a session whose rows are the board's pose means (``capture --board-poses``):
+#: the samples each mean averages.
+POSE_N_COLUMN = "pose_n"
+
 __all__ = [
     "HEAD_ROWS",
+    "POSE_N_COLUMN",
+    "pose_points",
     "PoseSettings",
     "ResolvedPoses",
     "session_poses",
@@ -297,3 +303,33 @@ def session_poses(
         raise CalibrationError("data must be rows of the session, shape (N, K)")
     how = s.resolve(names, arr[:HEAD_ROWS], accel=accel)
     return detect_poses(arr, **how.kwargs), how
+
+
+def pose_points(
+    table: Any, cols: list[int], settings: PoseSettings
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Still-pose means of columns ``cols`` of a :class:`~triaxcal.io.tables.Table`, and the
+    statistics that say how they were found (``poses``, ``n_poses``, ``pose_detection``: the
+    settings with the values the data decided, so that ``report`` finds the same poses again).
+
+    A session whose rows are the board's pose means (a ``pose_n`` column: ``triaxcal capture
+    --board-poses``) is taken as it is: each row is one pose, ``pose_source`` says so."""
+    if table.names is not None and POSE_N_COLUMN in table.names:
+        if not len(table.data):
+            raise CalibrationError(f"{table.path} has no poses: the board sent none")
+        n = table.data[:, table.names.index(POSE_N_COLUMN)]
+        return table.data[:, cols], {"poses": True, "n_poses": len(table.data),
+                                     "pose_source": "board",
+                                     "pose_samples_min": int(n.min()) if len(n) else 0}
+    accel = None if "accel" in sensor_columns(table.names) else cols
+    det, how = session_poses(table.names, table.data, settings, accel=accel)
+    if len(det.poses) == 0:
+        raise CalibrationError(
+            f"no still poses found in {table.path} (window {settings.window} samples): hold the "
+            "board still for a second in each pose, or drop --poses for point-per-row data"
+        )
+    pts = np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
+    stats = {"poses": True, "n_poses": len(det.poses),
+             "pose_detection": settings.with_resolved(how).to_dict(),
+             "pose_sensors": list(how.sensors)}
+    return pts, stats

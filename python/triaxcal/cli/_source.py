@@ -70,8 +70,8 @@ def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
     """Readings of ``sensor`` from a table already read (:func:`triaxcal.io.tables.read_table`):
     the table half of :func:`load_source` (``triaxcal batch`` fits each board so)."""
     from ..io.tables import pick_columns
+    from ..poses import pose_points
     from ._poses import settings_from_args
-    from .fit import pose_points
 
     cols = pick_columns(table, getattr(args, "columns", None), sensor)
     pose_stats: dict[str, Any] = {}

@@ -8,9 +8,10 @@ from typing import Any
 
 from ..errors import CalibrationError
 from ..io.board_poses import BoardPoseSettings
-from ..io.capture import POSE_N_COLUMN, capture, channel_names
+from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
+from ..poses import POSE_N_COLUMN
 from ._poses import add_pose_options, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"

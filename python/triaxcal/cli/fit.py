@@ -34,11 +34,9 @@ from ..errors import CalibrationError
 from ..field import ExpectedField
 from ..fit import MODELS
 from ..io.akm import apply_asa, asa_factors
-from ..io.capture import POSE_N_COLUMN
 from ..io.files import check_output
 from ..io.tables import SENSOR_COLUMNS, Table, pick_columns, read_table
 from ..parts import fold_asa
-from ..poses import PoseSettings, sensor_columns, session_poses
 from ..units import implausible_radius, unit_factor
 from ._field import add_field_options, alignment_for, expected_from_args, field_stats, yaw_part
 from ._poses import add_pose_options
@@ -219,36 +217,6 @@ class FitOutcome:
     #: Things to tell the user about the input (skipped lines, an implausible radius).
     notes: list[str] = field(default_factory=list)
     expected: ExpectedField | None = None
-
-
-def pose_points(
-    table: Table, cols: list[int], settings: PoseSettings
-) -> tuple[np.ndarray, dict[str, Any]]:
-    """Still-pose means of columns ``cols``, and the statistics that say how they were found
-    (``poses``, ``n_poses``, ``pose_detection``: the settings with the values the data
-    decided, so that ``report`` finds the same poses again).
-
-    A session whose rows are the board's pose means (a ``pose_n`` column: ``triaxcal capture
-    --board-poses``) is taken as it is: each row is one pose, ``pose_source`` says so."""
-    if table.names is not None and POSE_N_COLUMN in table.names:
-        if not len(table.data):
-            raise CalibrationError(f"{table.path} has no poses: the board sent none")
-        n = table.data[:, table.names.index(POSE_N_COLUMN)]
-        return table.data[:, cols], {"poses": True, "n_poses": len(table.data),
-                                     "pose_source": "board",
-                                     "pose_samples_min": int(n.min()) if len(n) else 0}
-    accel = None if "accel" in sensor_columns(table.names) else cols
-    det, how = session_poses(table.names, table.data, settings, accel=accel)
-    if len(det.poses) == 0:
-        raise CalibrationError(
-            f"no still poses found in {table.path} (window {settings.window} samples): hold the "
-            "board still for a second in each pose, or drop --poses for point-per-row data"
-        )
-    pts = np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
-    stats = {"poses": True, "n_poses": len(det.poses),
-             "pose_detection": settings.with_resolved(how).to_dict(),
-             "pose_sensors": list(how.sensors)}
-    return pts, stats
 
 
 def fit_file(args: argparse.Namespace, *, table: Table | None = None) -> FitOutcome:

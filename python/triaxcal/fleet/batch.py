@@ -309,7 +309,7 @@ def judge(
         if args.poses:
             try:
                 from ..cli._poses import settings_from_args
-                from ..cli.fit import pose_points
+                from ..poses import pose_points
 
                 pts, _ = pose_points(table, cols, settings_from_args(args))
             except CalibrationError:

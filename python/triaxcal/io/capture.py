@@ -40,7 +40,7 @@ from ..coverage import coverage as _coverage
 from ..coverage import sphere_cells, suggest_turn
 from ..detect import Pose, PoseDetector
 from ..errors import CalibrationError
-from ..poses import HEAD_ROWS, PoseSettings, ResolvedPoses
+from ..poses import HEAD_ROWS, POSE_N_COLUMN, PoseSettings, ResolvedPoses
 from .board_poses import BoardPoseSettings
 from .files import os_error_message
 from .protocol import CHANNELS_7, CHANNELS_10
@@ -61,7 +61,6 @@ __all__ = [
 
 
 #: The column of a session whose rows are the board's pose means (samples averaged per row).
-POSE_N_COLUMN = "pose_n"
 
 
 def channel_names(protocol: str, channels: int | None) -> tuple[str, ...]:
