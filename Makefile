@@ -1,12 +1,13 @@
 # One target per CI step; `.ci/run` calls `make test`, the README's test command.
 PY ?= python3
-APT_PACKAGES := gcc-avr avr-libc qemu-system-misc valgrind
+APT_PACKAGES := gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium chromium-driver valgrind
 
 .PHONY: deps install test test-rust test-python lint stubs bench bench-instructions instructions-guard demo wheel wheel-check
 
-# Debian packages the tests need (the AVR firmware build and its QEMU run; valgrind for the
-# instruction counts). Skipped when
-# everything is present already; needs root (as on CI) otherwise.
+# Debian packages the tests need (the AVR firmware build, its QEMU run, the Arduino sketch
+# built against the Arduino AVR core; the headless browser of the live page's tests; valgrind
+# for the instruction counts). Skipped when everything is present already; needs root (as on
+# CI) otherwise.
 deps:
 	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \

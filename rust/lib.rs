@@ -15,6 +15,7 @@
 //! ```
 
 mod algebraic;
+pub mod allan;
 pub mod batch;
 pub mod bounds;
 pub mod ellipsoid;

@@ -109,3 +109,72 @@ def test_readme_capture_example_runs(tmp_path, monkeypatch):
     assert env["result"].stopped_by == "poses" and len(env["result"].poses) == 10
     assert abs(np.linalg.norm(env["g"], axis=1).mean() - 1.0) < 1e-3
     assert (tmp_path / "session.csv").read_text().startswith("t,ax,ay,az,")
+
+
+# --- the same poses and the same coverage in capture, demo, fit and report ------------------
+
+
+def test_capture_and_demo_count_the_84_poses_and_cover_the_sphere(demo):
+    _, _, res, _ = demo
+    assert res["capture"]["poses_online"] == res["poses"] == 84
+    assert res["capture"]["coverage_pct"] == res["coverage_pct"] == 100.0
+    # the demo detected with nothing but the command line's defaults
+    from triaxcal.cli._poses import default_settings
+
+    d = res["pose_detection"]
+    assert {k: v for k, v in d.items() if k != "counts_per_g"} == {
+        k: v for k, v in default_settings().to_dict().items() if k != "counts_per_g"}
+    assert set(res["thresholds"]) == {"accel", "gyro", "mag"}
+
+
+def test_magnetometer_offset_from_the_poses_is_within_the_noise(demo):
+    _, _, res, _ = demo
+    truth = sim.SimIMU(res["seed"]).truth.mag
+    rows = {r["name"]: r for r in res["recovered"]["mag"]["params"]}
+    for i, axis in enumerate("xyz"):
+        r = rows[f"offset_{axis}"]
+        assert abs(r["recovered"] - truth.offset[i]) < 4 * r["stderr"] < 1.0, r  # counts
+
+
+def test_fit_and_report_find_the_same_poses_and_coverage(demo, tmp_path, capsys):
+    _, out, res, _ = demo
+    session = out / "session.csv"
+    cal = tmp_path / "cal.json"
+    capsys.readouterr()
+    assert main(["fit", str(session), "--poses", "-o", str(cal)]) == 0
+    assert main(["fit", str(session), "--poses", "--sensor", "mag", "-o", str(cal)]) == 0
+    printed = capsys.readouterr().out
+    assert printed.count("coverage 100 %") == 1 and "coverage 96 %" in printed
+    import triaxcal as tc
+
+    fitted = tc.Calibration.load(cal)
+    for part in (fitted.accel, fitted.mag):
+        assert part.stats["n_poses"] == 84 and part.stats["n_input"] == 84
+        assert part.stats["pose_sensors"] == ["accel", "gyro", "mag"]
+    assert fitted.accel.stats["coverage_pct"] == 100.0
+    truth = sim.SimIMU(res["seed"]).truth.mag
+    np.testing.assert_allclose(fitted.mag.offset, truth.offset, atol=1.0)  # counts (0.1 uT)
+    # report on the fit's calibration file, and on the demo's own: 84 readings, same coverage
+    for path in (cal, out / "calibration.json"):
+        jpath = tmp_path / f"{path.stem}-report.json"
+        assert main(["report", str(path), "--json", str(jpath)]) == 0
+        rep = json.loads(jpath.read_text())
+        assert rep["accel"]["n"] == 84 and rep["accel"]["coverage_pct"] == 100.0
+        assert rep["mag"]["n"] == 84
+        assert rep["mag"]["coverage_pct"] == fitted.mag.stats["coverage_pct"]
+    # and `report SESSION --poses` fits and reports the same 84
+    jpath = tmp_path / "session-report.json"
+    assert main(["report", str(session), "--poses", "--json", str(jpath)]) == 0
+    rep = json.loads(jpath.read_text())["accel"]
+    assert rep["n"] == 84 and rep["coverage_pct"] == 100.0
+
+
+def test_demo_takes_the_pose_options_of_the_command_line(tmp_path):
+    # the seed's rule alone (no gyro, no magnetometer) merges the twists at the poles, in the
+    # capture and in the detection on the saved session alike
+    rc = main(["demo", "--out", str(tmp_path), "--quiet", "--no-plot", "--gyro-threshold", "off",
+               "--mag-threshold", "off"])
+    assert rc == 0
+    res = json.loads((tmp_path / "results.json").read_text())
+    assert res["poses"] == res["capture"]["poses_online"] < 70
+    assert res["pose_detection"]["use_gyro"] is False

@@ -290,7 +290,13 @@ def test_packet_from_calibration_units(cal):
         unit="uT", radius=48.0,
     )
     c = cal.replace(mag=sym_mag)
-    p = decode_motioncal(motioncal_packet(c))
+    lost = tc.export.motioncal_losses(c)
+    assert any(m.startswith("accelerometer: gains") for m in lost)
+    assert any(m.startswith("gyro: temperature terms") for m in lost) == (
+        c.gyro.temperature is not None)
+    with pytest.raises(tc.CalibrationError, match="cannot carry all"):
+        motioncal_packet(c)  # the accelerometer's gains would be lost unnoticed
+    p = decode_motioncal(motioncal_packet(c, offsets_only=True))
     # accel: counts / 16384 * 9.80665 m/s^2; gyro: counts / 131 deg/s in rad/s; mag: counts / 10
     np.testing.assert_allclose(p.accel_offset, c.accel.offset / 16384 * 9.80665, rtol=1e-6)
     np.testing.assert_allclose(p.gyro_offset, np.radians(c.gyro.offset / 131), rtol=1e-6)
@@ -303,7 +309,18 @@ def test_packet_from_calibration_units(cal):
     theirs = np.array(p.soft_iron) @ (raw / 10 - np.array(p.mag_offset))
     np.testing.assert_allclose(theirs, mine, rtol=1e-5)
     with pytest.raises(tc.CalibrationError, match="symmetric"):
-        motioncal_packet(cal)  # the fixture's magnetometer matrix is not symmetric
+        motioncal_packet(cal, offsets_only=True)  # the fixture's mag matrix is not symmetric
+
+
+def test_packet_of_offsets_only_loses_nothing():
+    """A calibration the packet holds whole (nominal-scale accelerometer, symmetric soft iron,
+    no temperature terms) needs no opt-in."""
+    c = tc.Calibration(
+        accel=tc.SensorCalibration(offset=[12, -3, 40], matrix=np.eye(3) / 16384, unit="g"),
+        mag=tc.SensorCalibration(offset=[100, -50, 20], matrix=np.eye(3) * 0.1, unit="uT",
+                                 radius=48.0))
+    assert tc.export.motioncal_losses(c) == []
+    assert decode_motioncal(motioncal_packet(c)).field == pytest.approx(48.0)
 
 
 def test_parse_echo_amid_binary_noise():

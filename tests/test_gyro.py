@@ -9,7 +9,7 @@ import pytest
 import triaxcal as tc
 from _realdata import load_ferraris_session, load_gearvr, load_sunsided
 from triaxcal.methods import gyro as tg
-from triaxcal.sim import SimIMU, rotation_script
+from triaxcal.sim import Script, SimIMU, rotation_script
 
 RPM33 = 2 * math.pi * (100 / 3) / 60  # rad/s
 RPM45 = 2 * math.pi * 45 / 60
@@ -115,6 +115,68 @@ def test_sunsided_ccw_turns_show_the_flipped_x_axis(realdata):
         # two turns by hand: 720 deg (the gyro is in deg/s: nominal gain 1 count per deg/s)
         assert abs(abs(total[k]) / 720 - 1) < 0.005
     assert dirs == {"x": "cw", "y": "ccw", "z": "ccw"}
+
+
+SUNSIDED_TURNS = (("x", "rotate-360ccw-around-x-pointing-forward"),
+                  ("y", "rotate-360ccw-around-y-pointing-left"),
+                  ("z", "rotate-360ccw-around-z-pointing-up"))
+
+
+def test_sunsided_two_turns_give_gains_through_gyro_gains(realdata):
+    """Two 360 deg turns in a row, no rest at either end: integrate the whole recording.
+
+    The recorder already scaled the MPU-6050 to deg/s (the folder's README), so the nominal
+    gain is 1 count per deg/s; the bias comes from the 'unmoved' recording of the same board.
+    """
+    rest = tc.gyro_bias(load_sunsided(realdata, "unmoved-x-pointing-forward", "gyroscope")[:, 1:])
+    gains = {}
+    for axis, folder in SUNSIDED_TURNS:
+        g = load_sunsided(realdata, folder, "gyroscope")
+        t, w = g[:, 0], g[:, 1:]
+        # the detector finds no real pause between (or around) the turns: refused
+        with pytest.raises(tc.CalibrationError, match="still period|no rotation of about 720"):
+            tc.gyro_gains(w, angle_deg=720, t=t, axes=axis)
+        res = tc.gyro_gains(w, angle_deg=720, t=t, offset=rest.offset, turns=[(0, len(w))],
+                            axes=axis)
+        k = "xyz".index(axis)
+        (rot,) = res.rotations
+        assert (rot.start, rot.end, rot.axis) == (0, len(w), k) and rot.purity > 0.98
+        assert np.isnan(np.delete(res.gain_counts_per_dps, k)).all()
+        gains[axis] = (rot.direction, res.gain_counts_per_dps[k])
+    # x is sign-flipped on this board (the author's caveat): the ccw turns read as cw
+    assert {a: d for a, (d, _) in gains.items()} == {"x": "cw", "y": "ccw", "z": "ccw"}
+    # 1.0009, 1.0024, 1.0023 counts per deg/s: within 0.3 % of the nominal 1
+    g = np.array([v for _, v in gains.values()])
+    np.testing.assert_allclose(g, 1.0, atol=3e-3)
+
+
+def test_whole_turn_between_a_rest_at_each_end():
+    """Two 360 deg turns about z with a pause between them: per gap or as one 720 deg turn."""
+    imu = SimIMU(3)
+    script = Script.from_moves(np.eye(3), [[0, 0, 2 * math.pi], [0, 0, 2 * math.pi]],
+                               hold_s=[4.0, 1.5, 2.0])
+    rec = imu.record(script, rate_hz=200)
+    true_z = np.linalg.inv(imu.truth.gyro.matrix)[2, 2] * math.pi / 180  # counts per deg/s
+    each = tc.gyro_gains(rec.gyro, angle_deg=360, t=rec.t, axes="z")
+    assert [r.label for r in each.rotations] == ["z ccw", "z ccw"]
+    whole = tc.gyro_gains(rec.gyro, angle_deg=720, t=rec.t, axes="z", turns="whole")
+    (rot,) = whole.rotations
+    assert rot.start < each.rotations[0].start + 5 and rot.end > each.rotations[1].end - 5
+    assert abs(whole.gain_counts_per_dps[2] / true_z - 1) < 1e-3
+    assert abs(each.gain_counts_per_dps[2] / true_z - 1) < 1e-3
+    # the same turn given as an explicit interval, with the offset from the detected rests
+    expl = tc.gyro_gains(rec.gyro, angle_deg=720, t=rec.t, axes="z",
+                         turns=[(rot.start, rot.end)])
+    assert expl.gain_counts_per_dps[2] == pytest.approx(whole.gain_counts_per_dps[2], rel=1e-9)
+
+
+def test_time_stamps_in_bursts():
+    """A logger that stamps samples as it drains a FIFO: the detector uses the mean rate."""
+    _, rec = _sim_rotations(rate=200.0)
+    i = np.arange(len(rec.t))
+    bursty = (i // 10) * 0.05 + (i % 10) * 1e-4  # 10 samples per 50 ms read, 0.1 ms apart
+    labels = sorted(r.label for r in tc.find_rotations(rec.gyro, t=bursty))
+    assert labels == sorted(f"{a} {d}" for a in "xyz" for d in ("ccw", "cw"))
 
 
 def _plateau_rates(g, rate, fit):

@@ -285,7 +285,7 @@ def test_progress_line_bell_and_suggestion(tmp_path):
                 poses=3, progress=buf, bell=True, handle_sigint=False)
     text = buf.getvalue()
     assert text.count("\a") == 3
-    assert "3/3 poses" in text and "sphere" in text and "next: " in text
+    assert "3/3 poses" in text and "coverage" in text and "next: " in text
 
 
 # ----------------------------------------------------------------------- pulled cable
@@ -452,9 +452,9 @@ def test_request_byte_forms():
 
 
 def test_readme_capture_section_names_the_command():
-    text = (ROOT / "README.md").read_text()
-    start = text.index("<!-- section: capture")
-    section = text[start:text.index("<!-- /section -->", start)]
+    from conftest import readme_section
+
+    section = readme_section("Capture")
     assert "triaxcal capture --port" in section and "triaxcal demo" in section
 
 

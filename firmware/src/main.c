@@ -1,18 +1,25 @@
 /* triaxcal firmware for the ATmega328P (Arduino Uno): an MPU-6050 (or, with SIMULATED=1,
  * the simulated sensor) served over USART0 at 115200 baud in the protocols of protocol.h.
  * Boots in polled mode: '!' asks for one legacy binary frame; 'B', 'F', 'T', 'R' stream at
- * 100 records per second; 'P' stops streaming. */
+ * 100 records per second; 'S' detects still poses on the board and sends one framed record
+ * per pose, beeping the buzzer on PB0 (still.h, buzzer.h); 'P' stops. */
 #include <avr/interrupt.h>
 #include <avr/io.h>
 
+#include "buzzer.h"
 #include "protocol.h"
 #include "sensor.h"
+#include "still.h"
 #include "triaxcal_config.h"
 #include "uart.h"
 
 static volatile uint16_t ms; /* free-running milliseconds from Timer1 */
 
-ISR(TIMER1_COMPA_vect) { ms++; }
+ISR(TIMER1_COMPA_vect)
+{
+    ms++;
+    buzzer_tick();
+}
 
 static uint16_t millis16(void)
 {
@@ -46,10 +53,41 @@ static void sample_and(uint8_t how)
     }
 }
 
+static uint16_t last_status;
+
+static void start_poses(uint16_t now)
+{
+    still_start(proto_pose_settings());
+    proto_send_settings(1, still_settings());
+    last_status = now;
+}
+
+/* One sample of the still-pose mode: a pose frame and a beep when a pose is registered, a
+ * status frame after a window at most every STILL_STATUS_MS (and after each pose). */
+static void pose_step(uint16_t now)
+{
+    int16_t v[TRIAXCAL_CHANNELS];
+    if (sensor_read(v)) {
+        still_break(); /* a missing sample is never averaged into a pose */
+        return;
+    }
+    uint8_t ev = still_feed(v);
+    if (ev & STILL_EV_POSE) {
+        proto_send_pose(still_pose(), TRIAXCAL_CHANNELS);
+        buzzer_beep(still_settings()->beep_ms);
+    }
+    if ((ev & STILL_EV_POSE) ||
+        ((ev & STILL_EV_WINDOW) && (uint16_t)(now - last_status) >= STILL_STATUS_MS)) {
+        last_status = now;
+        proto_send_status(still_status());
+    }
+}
+
 int main(void)
 {
     uart_init(TRIAXCAL_BAUD);
     timer1_init();
+    buzzer_init();
     proto_set_writer(uart_putc);
     sei();
     sensor_init();
@@ -58,13 +96,27 @@ int main(void)
     for (;;) {
         int16_t c;
         while ((c = uart_getc()) >= 0) {
-            if (proto_feed((uint8_t)c, millis16()) == PROTO_EV_REQUEST) {
+            enum proto_event ev = proto_feed((uint8_t)c, millis16());
+            if (ev == PROTO_EV_REQUEST) {
                 sample_and(PROTO_REQUEST);
+            } else if (ev == PROTO_EV_MODE) {
+#if SIMULATED
+                sim_select_script(proto_mode() == PROTO_MODE_POSES);
+#endif
+                if (proto_mode() == PROTO_MODE_POSES) start_poses(millis16());
+            } else if (ev == PROTO_EV_SETTINGS && proto_mode() == PROTO_MODE_POSES) {
+                start_poses(millis16()); /* new settings take effect at once */
             }
         }
         uint16_t now = millis16();
-        if (proto_mode() != PROTO_MODE_POLLED &&
-            (uint16_t)(now - last) >= TRIAXCAL_STREAM_PERIOD_MS) {
+        uint8_t mode = proto_mode();
+        if (mode == PROTO_MODE_POSES) {
+            if ((uint16_t)(now - last) >= still_settings()->period_ms) {
+                last = now;
+                pose_step(now);
+            }
+        } else if (mode != PROTO_MODE_POLLED &&
+                   (uint16_t)(now - last) >= TRIAXCAL_STREAM_PERIOD_MS) {
             last = now;
             sample_and(0);
         }

@@ -9,10 +9,16 @@ static proto_writer put;
 static uint8_t mode = PROTO_MODE_POLLED;
 static uint8_t seq;
 
-static uint8_t pkt[MOTIONCAL_PACKET_LEN];
-static uint8_t pkt_len; /* 0: not inside a packet */
+static uint8_t pkt[MOTIONCAL_PACKET_LEN]; /* the longest packet */
+static uint8_t pkt_len;                   /* 0: not inside a packet */
+static uint8_t pkt_need;                  /* length of the packet being received */
+static uint8_t pkt_second;                /* its second byte */
 static uint16_t pkt_start_ms;
 static struct motioncal cal;
+static struct still_settings pose_settings = {
+    STILL_DEFAULT_PERIOD_MS,       STILL_DEFAULT_WINDOW,         STILL_DEFAULT_HOLD_WINDOWS,
+    STILL_DEFAULT_HOLDOFF_MS,      STILL_DEFAULT_ACCEL_THRESHOLD, STILL_DEFAULT_GYRO_THRESHOLD,
+    STILL_DEFAULT_BEEP_MS};
 
 static void put_nothing(uint8_t byte) { (void)byte; }
 
@@ -21,6 +27,8 @@ void proto_set_writer(proto_writer writer) { put = writer ? writer : put_nothing
 uint8_t proto_mode(void) { return mode; }
 
 const struct motioncal *proto_cal(void) { return &cal; }
+
+const struct still_settings *proto_pose_settings(void) { return &pose_settings; }
 
 void proto_put_str(const char *s)
 {
@@ -73,24 +81,74 @@ void proto_send_binary(const int16_t *values, uint8_t k)
     put('\n');
 }
 
+/* COBS(seq, payload, CRC-16/CCITT-FALSE LE) + 0x00; n <= PROTO_FRAME_MAX bytes. */
+#define PROTO_FRAME_MAX (2 + 2 + 2 + 4 * PROTO_MAX_CHANNELS)
+static void send_frame(const uint8_t *payload, uint8_t n)
+{
+    uint8_t raw[1 + PROTO_FRAME_MAX + 2];
+    uint8_t enc[sizeof raw + sizeof raw / 254 + 1];
+    uint8_t m = 0;
+    raw[m++] = seq++;
+    for (uint8_t i = 0; i < n; i++) raw[m++] = payload[i];
+    uint16_t crc = crc16_ccitt(raw, m);
+    raw[m++] = (uint8_t)(crc & 0xFF);
+    raw[m++] = (uint8_t)(crc >> 8);
+    uint16_t len = cobs_encode(raw, m, enc);
+    for (uint16_t i = 0; i < len; i++) put(enc[i]);
+    put(0);
+}
+
+static uint8_t put_le(uint8_t *p, uint32_t v, uint8_t bytes)
+{
+    for (uint8_t i = 0; i < bytes; i++) {
+        p[i] = (uint8_t)(v & 0xFF);
+        v >>= 8;
+    }
+    return bytes;
+}
+
 void proto_send_framed(const int16_t *values, uint8_t k)
 {
-    uint8_t raw[1 + 2 * PROTO_MAX_CHANNELS + 2];
-    uint8_t enc[sizeof raw + sizeof raw / 254 + 1];
+    uint8_t payload[2 * PROTO_MAX_CHANNELS];
     if (k > PROTO_MAX_CHANNELS) k = PROTO_MAX_CHANNELS;
     uint8_t n = 0;
-    raw[n++] = seq++;
-    for (uint8_t i = 0; i < k; i++) {
-        uint16_t u = (uint16_t)values[i];
-        raw[n++] = (uint8_t)(u & 0xFF);
-        raw[n++] = (uint8_t)(u >> 8);
-    }
-    uint16_t crc = crc16_ccitt(raw, n);
-    raw[n++] = (uint8_t)(crc & 0xFF);
-    raw[n++] = (uint8_t)(crc >> 8);
-    uint16_t m = cobs_encode(raw, n, enc);
-    for (uint16_t i = 0; i < m; i++) put(enc[i]);
-    put(0);
+    for (uint8_t i = 0; i < k; i++) n += put_le(payload + n, (uint16_t)values[i], 2);
+    send_frame(payload, n);
+}
+
+void proto_send_pose(const struct still_pose *pose, uint8_t k)
+{
+    uint8_t payload[PROTO_FRAME_MAX];
+    if (k > STILL_CHANNELS) k = STILL_CHANNELS;
+    uint8_t n = 0;
+    payload[n++] = PROTO_FRAME_POSE;
+    n += put_le(payload + n, pose->index, 2);
+    n += put_le(payload + n, pose->n, 2);
+    for (uint8_t i = 0; i < k; i++) n += put_le(payload + n, (uint32_t)pose->sum[i], 4);
+    send_frame(payload, n);
+}
+
+void proto_send_status(const struct still_status *st)
+{
+    uint8_t payload[17];
+    uint8_t n = 0;
+    payload[n++] = PROTO_FRAME_STATUS;
+    payload[n++] = st->flags;
+    payload[n++] = st->run;
+    n += put_le(payload + n, st->poses, 2);
+    for (uint8_t i = 0; i < 3; i++) n += put_le(payload + n, (uint16_t)st->accel[i], 2);
+    for (uint8_t i = 0; i < 3; i++) n += put_le(payload + n, (uint16_t)st->rate[i], 2);
+    send_frame(payload, n);
+}
+
+void proto_send_settings(uint8_t accepted, const struct still_settings *s)
+{
+    uint8_t payload[3 + STILL_SETTINGS_BYTES];
+    payload[0] = PROTO_FRAME_SETTINGS;
+    payload[1] = accepted;
+    payload[2] = STILL_SETTINGS_VERSION;
+    still_pack(s, payload + 3);
+    send_frame(payload, sizeof payload);
 }
 
 void proto_send_text(const int16_t *values, uint8_t k)
@@ -127,7 +185,7 @@ void proto_send_stream(const int16_t *values, uint8_t k)
     case PROTO_MODE_FRAMED: proto_send_framed(values, k); break;
     case PROTO_MODE_TEXT: proto_send_text(values, k); break;
     case PROTO_MODE_RAW: proto_send_raw_mpu(values); break;
-    default: break;
+    default: break; /* polled; the still-pose mode sends poses, not samples */
     }
 }
 
@@ -158,6 +216,24 @@ void proto_send_cal_lines(const struct motioncal *c)
     proto_put_str("\r\n");
 }
 
+static enum proto_event settings_done(void)
+{
+    uint16_t crc = crc16_ccitt(pkt, PROTO_SETTINGS_PACKET_LEN - 2);
+    uint16_t got = (uint16_t)pkt[PROTO_SETTINGS_PACKET_LEN - 2] |
+                   (uint16_t)((uint16_t)pkt[PROTO_SETTINGS_PACKET_LEN - 1] << 8);
+    pkt_len = 0;
+    if (crc != got) return PROTO_EV_NONE; /* damaged: no answer, as for MotionCal's packet */
+    struct still_settings s;
+    still_unpack(pkt + 2, &s);
+    if (!still_valid(&s)) {
+        proto_send_settings(0, &pose_settings); /* refused: the settings in use */
+        return PROTO_EV_NONE;
+    }
+    pose_settings = s;
+    proto_send_settings(1, &pose_settings);
+    return PROTO_EV_SETTINGS;
+}
+
 static enum proto_event packet_done(void)
 {
     uint16_t crc = crc16_modbus(pkt, MOTIONCAL_PACKET_LEN - 2);
@@ -176,6 +252,17 @@ static enum proto_event packet_done(void)
     return PROTO_EV_CAL;
 }
 
+static enum proto_event packet_start(uint8_t byte, uint8_t need, uint8_t second,
+                                     uint16_t now_ms)
+{
+    pkt[0] = byte;
+    pkt_len = 1;
+    pkt_need = need;
+    pkt_second = second;
+    pkt_start_ms = now_ms;
+    return PROTO_EV_NONE;
+}
+
 enum proto_event proto_feed(uint8_t byte, uint16_t now_ms)
 {
     if (!put) put = put_nothing;
@@ -183,21 +270,21 @@ enum proto_event proto_feed(uint8_t byte, uint16_t now_ms)
         pkt_len = 0; /* a packet cut short: treat this byte afresh */
     }
     if (pkt_len == 1) {
-        if (byte == 84) {
+        if (byte == pkt_second) {
             pkt[pkt_len++] = byte;
             return PROTO_EV_NONE;
         }
-        pkt_len = 0; /* 117 alone was not a packet start */
+        pkt_len = 0; /* the first byte alone was not a packet start */
     } else if (pkt_len) {
         pkt[pkt_len++] = byte;
-        return pkt_len == MOTIONCAL_PACKET_LEN ? packet_done() : PROTO_EV_NONE;
+        if (pkt_len < pkt_need) return PROTO_EV_NONE;
+        return pkt[0] == PROTO_SETTINGS_START ? settings_done() : packet_done();
     }
     switch (byte) {
     case 117:
-        pkt[0] = byte;
-        pkt_len = 1;
-        pkt_start_ms = now_ms;
-        return PROTO_EV_NONE;
+        return packet_start(byte, MOTIONCAL_PACKET_LEN, 84, now_ms);
+    case PROTO_SETTINGS_START:
+        return packet_start(byte, PROTO_SETTINGS_PACKET_LEN, PROTO_SETTINGS_VERSION, now_ms);
     case PROTO_REQUEST:
         return PROTO_EV_REQUEST;
     case PROTO_MODE_POLLED:
@@ -205,6 +292,7 @@ enum proto_event proto_feed(uint8_t byte, uint16_t now_ms)
     case PROTO_MODE_FRAMED:
     case PROTO_MODE_TEXT:
     case PROTO_MODE_RAW:
+    case PROTO_MODE_POSES:
         mode = byte;
         return PROTO_EV_MODE;
     default:

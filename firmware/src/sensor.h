@@ -4,6 +4,8 @@
 
 #include <stdint.h>
 
+#include "triaxcal_config.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -12,6 +14,12 @@ extern "C" {
 uint8_t sensor_init(void);
 /* Read one sample as int16 counts in the order ax ay az gx gy gz temp; 0 on success. */
 uint8_t sensor_read(int16_t out[7]);
+
+#if SIMULATED
+/* The simulated sensor's script (sim_truth.h): 0 the quick globe (SIM_SAMPLES_PER_POSE still
+ * samples per pose, going on where it was), 1 the globe with moves, from its first pose. */
+void sim_select_script(uint8_t moving);
+#endif
 
 #ifdef __cplusplus
 }

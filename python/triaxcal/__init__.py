@@ -4,9 +4,10 @@ Fits run in Rust (``triaxcal._core``) with the GIL released; capture, export and
 Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
 """
 
-from . import sim
+from . import rotations, sim
 from ._core import __version__
-from .calibration import Calibration, SensorCalibration, TemperatureTerms
+from .calibration import Alignment, Calibration, SensorCalibration, TemperatureTerms
+from .compare import CalibrationDiff, compare
 from .detect import (
     Pose,
     PoseDetection,
@@ -25,11 +26,13 @@ from .export import (
     c_header,
     decode_motioncal,
     encode_motioncal,
+    js_module,
     kalibr_imu_yaml,
     motioncal_packet,
     px4_params_file,
     write_outputs,
 )
+from .field import ExpectedField, expected_field
 from .fit import (
     MODELS,
     BatchFit,
@@ -44,8 +47,19 @@ from .fit import (
     grid_center,
     sphere_error,
 )
+from .fleet.autocal import AutoCalibration, autocalibrate
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
+from .io.tables import Table, read_table
+from .methods.alignment import (
+    AlignmentWarning,
+    MagAccelAlignment,
+    align_mag_accel,
+    axis_heading,
+    heading_errors,
+)
+from .methods.allan import AllanAccumulator, AllanDeviation, allan
+from .methods.bootstrap import BootstrapIntervals, bootstrap
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -62,6 +76,7 @@ from .methods.imu import (
     TriadCalibration,
     calibrate_imu,
 )
+from .methods.noise import AxisNoise, NoiseFigures, kalibr_noise, noise_figures, plot_allan
 from .methods.static import (
     FerrarisCalibration,
     SixPosition,
@@ -71,10 +86,50 @@ from .methods.static import (
     tilt_rig,
 )
 from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .methods.yaw import YawCalibration, fit_yaw
+from .parts import (
+    fold_asa,
+    part_from_center,
+    part_from_gyro_gains,
+    part_from_temperature,
+    part_from_tilt_rig,
+)
+from .poses import PoseSettings, session_poses
 from .report import QualityReport, plot_report, quality_report
 from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
+    "AllanAccumulator",
+    "AllanDeviation",
+    "AxisNoise",
+    "BootstrapIntervals",
+    "CalibrationDiff",
+    "NoiseFigures",
+    "allan",
+    "bootstrap",
+    "compare",
+    "kalibr_noise",
+    "noise_figures",
+    "plot_allan",
+    "PoseSettings",
+    "session_poses",
+    "fold_asa",
+    "part_from_center",
+    "part_from_gyro_gains",
+    "part_from_temperature",
+    "part_from_tilt_rig",
+    "js_module",
+    "YawCalibration",
+    "fit_yaw",
+    "Alignment",
+    "AlignmentWarning",
+    "MagAccelAlignment",
+    "align_mag_accel",
+    "axis_heading",
+    "heading_errors",
+    "rotations",
+    "ExpectedField",
+    "expected_field",
     "LogRecording",
     "Stream",
     "adafruit_calib_json",
@@ -82,6 +137,8 @@ __all__ = [
     "kalibr_imu_yaml",
     "px4_params_file",
     "read_log",
+    "read_table",
+    "Table",
     "fit_temperature",
     "TemperatureRangeWarning",
     "TemperatureModel",
@@ -145,4 +202,6 @@ __all__ = [
     "plot_report",
     "quality_report",
     "write_outputs",
+    "AutoCalibration",
+    "autocalibrate",
 ]

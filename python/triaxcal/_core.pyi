@@ -1,6 +1,6 @@
 """Stubs of the compiled core (``rust/py/mod.rs``). Use the ``triaxcal`` package instead."""
 
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
@@ -18,6 +18,7 @@ __all__ = [
     "fit_ellipsoid",
     "fit_batch",
     "apply",
+    "AllanStream",
 ]
 
 __version__: str
@@ -71,3 +72,15 @@ def fit_batch(
 def apply(
     points: _Points, offset: _Vec3, matrix: list[list[float]]
 ) -> npt.NDArray[np.float64]: ...
+
+@final
+class AllanStream:
+    def __new__(
+        cls, rate_hz: float, axes: int, ms: list[int], *, exact_up_to: int | None
+    ) -> AllanStream: ...
+    def push(self, chunk: npt.NDArray[np.float64]) -> None: ...
+    @property
+    def n(self) -> int: ...
+    @property
+    def memory_bytes(self) -> int: ...
+    def result(self) -> dict[str, Any]: ...

@@ -14,6 +14,15 @@ The JSON file (``"schema": "triaxcal.calibration/1"``) keeps the autopilots' par
 ``offset``, ``diag``, ``offdiag`` (``[xy, xz, yz]``, the upper triangle; a non-symmetric matrix
 adds ``offdiag_lower`` ``[yx, zx, zy]``) and ``radius``. Floats are written with ``repr`` (the
 shortest text that reads back to the same double), so ``load(save(cal)) == cal`` exactly.
+
+A part that replaced an earlier calibration of the same sensor keeps a ``previous`` list of
+summaries (newest first, at most :data:`MAX_PREVIOUS`): when it was replaced, the coefficients,
+units, standard errors and provenance -- enough for ``triaxcal diff`` to say what changed.
+
+A magnetometer part may also hold the field the World Magnetic Model expects where it was
+calibrated (``expected_field``, :class:`triaxcal.field.ExpectedField`) and its alignment with
+the accelerometer (``alignment``, :class:`Alignment`: ``v_accel = rotation @ v_mag`` for
+calibrated readings; :meth:`SensorCalibration.apply_aligned`).
 """
 
 from __future__ import annotations
@@ -30,13 +39,19 @@ from typing import Any
 
 import numpy as np
 
+from . import _schema
 from ._core import __version__
 from ._validate import as_points
 from .errors import CalibrationError
+from .field import ExpectedField
+from .io.files import read_bounded, write_file
+from .rotations import Alignment
 
 __all__ = [
+    "KNOWN_MODELS",
     "SCHEMA",
     "SENSORS",
+    "Alignment",
     "Calibration",
     "SensorCalibration",
     "TemperatureTerms",
@@ -46,7 +61,12 @@ __all__ = [
 SCHEMA_NAME = "triaxcal.calibration"
 SCHEMA_VERSION = 1
 SCHEMA = f"{SCHEMA_NAME}/{SCHEMA_VERSION}"
-SENSORS = ("accel", "gyro", "mag")
+SENSORS = _schema.SENSORS
+#: Model names a part may carry (see :mod:`triaxcal._schema`).
+KNOWN_MODELS = _schema.KNOWN_MODELS
+
+#: Most summaries of replaced calibrations a part keeps (newest first).
+MAX_PREVIOUS = _schema.MAX_PREVIOUS
 
 _AXES = ("x", "y", "z")
 _UPPER = ((0, 1), (0, 2), (1, 2))  # xy, xz, yz
@@ -70,75 +90,14 @@ def sha256_points(points: Any) -> str:
     return hashlib.sha256(arr.tobytes()).hexdigest()
 
 
-def _float(value: Any, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise CalibrationError(f"{what} must be a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise CalibrationError(f"{what} must be finite, got {v}")
-    return v
-
-
-def _array(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{what} must be numbers of shape {shape}, got {value!r}") from None
-    if arr.shape != shape:
-        raise CalibrationError(f"{what} must have shape {shape}, got {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise CalibrationError(f"{what} must be finite, got {arr.tolist()}")
-    arr.setflags(write=False)
-    return arr
-
-
-def _poly(value: Any, what: str) -> np.ndarray:
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{what} must be rows of 3 numbers, got {value!r}") from None
-    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < 1:
-        raise CalibrationError(
-            f"{what} must have shape (degree + 1, 3), lowest order first; got {arr.shape}"
-        )
-    if not np.isfinite(arr).all():
-        raise CalibrationError(f"{what} must be finite")
-    arr.setflags(write=False)
-    return arr
-
-
 def _jsonable(value: Any, what: str) -> Any:
     """Deep-copy ``value`` into plain JSON types (dict/list/str/float/int/bool/None)."""
-    if value is None or isinstance(value, (str, bool)):
-        return value
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        if not math.isfinite(v):
-            raise CalibrationError(f"{what} must be finite, got {v}")
-        return v
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist(), what)
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v, f"{what}.{k}") for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v, what) for v in value]
-    raise CalibrationError(f"{what} holds {type(value).__name__}, which JSON cannot store")
+    return _schema.json_value(value, what)
 
 
-def _keys(d: Mapping[str, Any], required: set[str], optional: set[str], what: str) -> None:
-    if not isinstance(d, Mapping):
-        raise CalibrationError(f"{what} must be a JSON object, got {type(d).__name__}")
-    missing = required - set(d)
-    if missing:
-        raise CalibrationError(f"{what} lacks {sorted(missing)}: the file is incomplete")
-    unknown = set(d) - required - optional
-    if unknown:
-        raise CalibrationError(
-            f"{what} has unknown field(s) {sorted(unknown)}; put free-form metadata under "
-            "the top-level 'extra' object"
-        )
+def _summary(d: Any, what: str) -> dict[str, Any]:
+    """A validated, plain-JSON copy of one ``previous`` summary (see the module docstring)."""
+    return _schema.summary(d, what)
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,14 +125,10 @@ class TemperatureTerms:
     gain_poly: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "temp_ref_c", _float(self.temp_ref_c, "temp_ref_c"))
-        rng = _array(self.temp_range_c, (2,), "temp_range_c")
-        if rng[0] > rng[1]:
-            raise CalibrationError(f"temp_range_c must be (lowest, highest), got {rng.tolist()}")
-        object.__setattr__(self, "temp_range_c", (float(rng[0]), float(rng[1])))
-        object.__setattr__(self, "offset_poly", _poly(self.offset_poly, "offset_poly"))
-        if self.gain_poly is not None:
-            object.__setattr__(self, "gain_poly", _poly(self.gain_poly, "gain_poly"))
+        for name, f in _schema.TEMPERATURE_FIELDS.items():
+            value = getattr(self, name)
+            if value is not None or f.required:
+                object.__setattr__(self, name, f.check(value, name))
 
     def offset_delta(self, temperature: Any) -> np.ndarray:
         """Offset change ``sum_k offset_poly[k] * dT**k`` in raw units, shape (N, 3)."""
@@ -197,14 +152,9 @@ class TemperatureTerms:
         return d
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> TemperatureTerms:
-        _keys(d, {"temp_ref_c", "temp_range_c", "offset_poly"}, {"gain_poly"}, "temperature")
-        return cls(
-            temp_ref_c=d["temp_ref_c"],
-            temp_range_c=d["temp_range_c"],
-            offset_poly=d["offset_poly"],
-            gain_poly=d.get("gain_poly"),
-        )
+    def from_dict(cls, d: Mapping[str, Any], what: str = "temperature") -> TemperatureTerms:
+        """Inverse of :meth:`to_dict`; raises :class:`CalibrationError` when malformed."""
+        return cls(**_schema.check_fields(d, _schema.TEMPERATURE_FIELDS, what))
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, TemperatureTerms) and self.to_dict() == other.to_dict()
@@ -218,7 +168,6 @@ def _horner(poly: np.ndarray, dt: np.ndarray) -> np.ndarray:
     for row in poly[-2::-1]:
         acc = acc * dt + row
     return acc
-
 
 @dataclass(frozen=True, eq=False)
 class SensorCalibration:
@@ -247,6 +196,14 @@ class SensorCalibration:
         SHA-256 of the input data (see :func:`sha256_points`), for provenance.
     source : str, optional
         Where the data came from (a file name), for provenance.
+    previous : tuple of dict
+        Summaries of the calibrations of this sensor that this one replaced, newest first (see
+        :meth:`with_previous`).
+    expected_field : ExpectedField, optional
+        The field the World Magnetic Model expects where the part was calibrated (magnetometer).
+    alignment : Alignment, optional
+        Rotation of this part's calibrated frame into another part's (magnetometer into
+        accelerometer); :meth:`apply_aligned` applies it.
     """
 
     offset: np.ndarray
@@ -259,28 +216,37 @@ class SensorCalibration:
     stats: dict[str, Any] = field(default_factory=dict)
     input_sha256: str | None = None
     source: str | None = None
+    previous: tuple[dict[str, Any], ...] = ()
+    expected_field: ExpectedField | None = None
+    alignment: Alignment | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "offset", _array(self.offset, (3,), "offset"))
-        object.__setattr__(self, "matrix", _array(self.matrix, (3, 3), "matrix"))
-        for name in ("raw_unit", "unit"):
-            v = getattr(self, name)
-            if not isinstance(v, str) or not v.strip():
-                raise CalibrationError(f"{name} must be a unit name such as 'counts' or 'g'")
-        if abs(np.linalg.det(self.matrix)) < 1e-300:
-            raise CalibrationError("matrix is singular: it would map readings to a plane")
-        if self.radius is not None:
-            r = _float(self.radius, "radius")
-            if r <= 0:
-                raise CalibrationError(f"radius must be greater than zero, got {r}")
-            object.__setattr__(self, "radius", r)
+        f = _schema.PART_FIELDS
+        object.__setattr__(self, "offset", f["offset"].check(self.offset, "offset"))
+        matrix = _schema.reals(self.matrix, (3, 3), "matrix")
+        _schema.check_matrix(matrix, "matrix")
+        object.__setattr__(self, "matrix", matrix)
+        for name in ("raw_unit", "unit", "radius", "model", "input_sha256", "source"):
+            object.__setattr__(self, name, f[name].check(getattr(self, name), name))
         if self.temperature is not None and not isinstance(self.temperature, TemperatureTerms):
             object.__setattr__(self, "temperature", TemperatureTerms.from_dict(self.temperature))
-        object.__setattr__(self, "stats", _jsonable(dict(self.stats), "stats"))
-        for name in ("model", "input_sha256", "source"):
-            v = getattr(self, name)
-            if v is not None and not isinstance(v, str):
-                raise CalibrationError(f"{name} must be a string or None, got {v!r}")
+        if not isinstance(self.stats, Mapping):
+            raise CalibrationError(f"stats must be a mapping, got {type(self.stats).__name__}")
+        object.__setattr__(self, "stats", _schema.stats_object(dict(self.stats), "stats"))
+        prev = self.previous
+        if isinstance(prev, (str, bytes, Mapping)) or not isinstance(prev, (list, tuple)):
+            raise CalibrationError("previous must be a list of summaries (newest first)")
+        if len(prev) > 10 * MAX_PREVIOUS:
+            raise CalibrationError(f"previous holds {len(prev)} summaries; at most "
+                                   f"{MAX_PREVIOUS} are kept")
+        object.__setattr__(self, "previous", tuple(
+            _summary(p, f"previous[{i}]") for i, p in enumerate(prev)))
+        if self.expected_field is not None and not isinstance(self.expected_field,
+                                                              ExpectedField):
+            object.__setattr__(self, "expected_field",
+                               ExpectedField.from_dict(self.expected_field))
+        if self.alignment is not None and not isinstance(self.alignment, Alignment):
+            object.__setattr__(self, "alignment", Alignment.from_dict(self.alignment))
 
     # -- constructors ---------------------------------------------------------------------
     @classmethod
@@ -468,6 +434,24 @@ class SensorCalibration:
         out = d @ self.matrix.T
         return out[0] if single else out
 
+    def apply_aligned(self, raw: Any, temperature: Any = None) -> np.ndarray:
+        """Calibrate, then turn into the aligned frame: ``apply(raw) @ alignment.rotation.T``.
+
+        Raises :class:`CalibrationError` when the part has no alignment.
+        """
+        if self.alignment is None:
+            raise CalibrationError(
+                "this part has no alignment: fit one with tc.align_mag_accel (or `triaxcal fit "
+                "--sensor mag --align`), or use apply()")
+        out = self.apply(raw, temperature=temperature)
+        return out @ self.alignment.rotation.T
+
+    def replace(self, **changes: Any) -> SensorCalibration:
+        """A copy with some fields changed (e.g. ``part.replace(alignment=None)``)."""
+        import dataclasses
+
+        return dataclasses.replace(self, **changes)
+
     @property
     def diag(self) -> np.ndarray:
         """Diagonal of ``matrix`` (per-axis gain), calibrated units per raw unit."""
@@ -482,6 +466,63 @@ class SensorCalibration:
     def symmetric(self) -> bool:
         """Whether ``matrix`` is exactly symmetric (as every ellipsoid fit returns)."""
         return all(self.matrix[i, j] == self.matrix[j, i] for i, j in _UPPER)
+
+    # -- history --------------------------------------------------------------------------
+    def summary(self, *, replaced_utc: str | None = None, created_utc: str = "") -> dict[str, Any]:
+        """What ``previous`` keeps of this part once it is replaced: coefficients, units,
+        standard errors, residual RMS and provenance (no temperature terms, no history)."""
+        d: dict[str, Any] = {
+            "replaced_utc": replaced_utc or _now_utc(),
+            "created_utc": created_utc,
+            "raw_unit": self.raw_unit,
+            "unit": self.unit,
+            "offset": self.offset.tolist(),
+            "diag": self.diag.tolist(),
+            "offdiag": self.offdiag.tolist(),
+        }
+        if not self.symmetric:
+            d["offdiag_lower"] = [float(self.matrix[i, j]) for i, j in _LOWER]
+        d["radius"] = self.radius
+        d["model"] = self.model
+        for k in ("stderr", "rms", "n"):
+            if k in self.stats:
+                d[k] = self.stats[k]
+        d["input_sha256"] = self.input_sha256
+        d["source"] = self.source
+        return _summary(d, "summary")
+
+    def with_previous(self, old: SensorCalibration, *, created_utc: str = "",
+                      replaced_utc: str | None = None) -> SensorCalibration:
+        """This part, remembering that it replaced ``old`` (whose file was created at
+        ``created_utc``): ``old``'s summary, then ``old``'s own history, newest first, at most
+        :data:`MAX_PREVIOUS`."""
+        hist = (old.summary(replaced_utc=replaced_utc, created_utc=created_utc),
+                *old.previous)
+        fields = {k: getattr(self, k) for k in ("offset", "matrix", "raw_unit", "unit",
+                                                "radius", "model", "temperature", "stats",
+                                                "input_sha256", "source")}
+        return SensorCalibration(**fields, previous=hist[:MAX_PREVIOUS])
+
+    def previous_part(self, index: int = 0) -> SensorCalibration:
+        """The replaced calibration ``previous[index]`` as a part (its standard errors, RMS and
+        reading count in ``stats``), e.g. to compare with this one."""
+        if not 0 <= index < len(self.previous):
+            raise CalibrationError(
+                f"this part keeps {len(self.previous)} earlier calibration(s); no "
+                f"previous[{index}]"
+            )
+        p = self.previous[index]
+        m = np.diag(p["diag"])
+        lower = p.get("offdiag_lower") or p["offdiag"]
+        for k, (i, j) in enumerate(_UPPER):
+            m[i, j] = p["offdiag"][k]
+            m[j, i] = lower[k]
+        return SensorCalibration(
+            offset=p["offset"], matrix=m, raw_unit=p["raw_unit"], unit=p["unit"],
+            radius=p.get("radius"), model=p.get("model"),
+            stats={k: p[k] for k in ("stderr", "rms", "n") if k in p},
+            input_sha256=p.get("input_sha256"), source=p.get("source"),
+        )
 
     # -- JSON -----------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -501,42 +542,42 @@ class SensorCalibration:
         d["input_sha256"] = self.input_sha256
         d["source"] = self.source
         d["stats"] = self.stats
+        if self.previous:
+            d["previous"] = [dict(p) for p in self.previous]
+        if self.expected_field is not None:
+            d["expected_field"] = self.expected_field.to_dict()
+        if self.alignment is not None:
+            d["alignment"] = self.alignment.to_dict()
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], what: str = "part") -> SensorCalibration:
         """Inverse of :meth:`to_dict`; raises :class:`CalibrationError` when malformed."""
-        _keys(
-            d,
-            {"raw_unit", "unit", "offset", "diag", "offdiag"},
-            {"offdiag_lower", "radius", "model", "temperature", "input_sha256", "source", "stats"},
-            what,
-        )
-        diag = _array(d["diag"], (3,), f"{what}.diag")
-        upper = _array(d["offdiag"], (3,), f"{what}.offdiag")
-        lower = upper
-        if d.get("offdiag_lower") is not None:
-            lower = _array(d["offdiag_lower"], (3,), f"{what}.offdiag_lower")
+        v = _schema.check_fields(d, _schema.PART_FIELDS, what)
+        diag, upper = v["diag"], v["offdiag"]
+        lower = v.get("offdiag_lower")
+        lower = upper if lower is None else lower
         m = np.diag(diag)
         for k, (i, j) in enumerate(_UPPER):
             m[i, j] = upper[k]
             m[j, i] = lower[k]
-        temp = d.get("temperature")
-        stats = d.get("stats") or {}
-        if not isinstance(stats, Mapping):
-            raise CalibrationError(f"{what}.stats must be a JSON object")
+        _schema.check_matrix(m, what)
+        temp = v.get("temperature")
         try:
             return cls(
-                offset=_array(d["offset"], (3,), f"{what}.offset"),
+                offset=v["offset"],
                 matrix=m,
-                raw_unit=d["raw_unit"],
-                unit=d["unit"],
-                radius=d.get("radius"),
-                model=d.get("model"),
-                temperature=None if temp is None else TemperatureTerms.from_dict(temp),
-                stats=dict(stats),
-                input_sha256=d.get("input_sha256"),
-                source=d.get("source"),
+                raw_unit=v["raw_unit"],
+                unit=v["unit"],
+                radius=v.get("radius"),
+                model=v.get("model"),
+                temperature=None if temp is None else TemperatureTerms(**temp),
+                stats=v.get("stats") or {},
+                input_sha256=v.get("input_sha256"),
+                source=v.get("source"),
+                previous=v.get("previous") or (),
+                expected_field=v.get("expected_field"),
+                alignment=v.get("alignment"),
             )
         except CalibrationError as exc:
             raise CalibrationError(f"{what}: {exc}") from None
@@ -613,10 +654,16 @@ class Calibration:
                 )
         if not any(getattr(self, s) is not None for s in SENSORS):
             raise CalibrationError("a Calibration needs at least one of accel, gyro, mag")
+        for name in SENSORS:
+            part = getattr(self, name)
+            if part is not None and part.alignment is not None and part.alignment.to == name:
+                raise CalibrationError(f"{name}.alignment.to is {name}: a part cannot be aligned "
+                                       "to itself")
         for name in ("sensor_id", "created_utc", "library_version"):
-            if not isinstance(getattr(self, name), str):
-                raise CalibrationError(f"{name} must be a string")
-        object.__setattr__(self, "extra", _jsonable(dict(self.extra), "extra"))
+            _schema.TOP_FIELDS[name].check(getattr(self, name), name)
+        if not isinstance(self.extra, Mapping):
+            raise CalibrationError(f"extra must be a mapping, got {type(self.extra).__name__}")
+        object.__setattr__(self, "extra", _schema.json_object(dict(self.extra), "extra"))
 
     @property
     def sensors(self) -> tuple[str, ...]:
@@ -666,63 +713,62 @@ class Calibration:
         if not isinstance(d, Mapping):
             raise CalibrationError("a calibration file must hold a JSON object")
         _check_schema(d.get("schema"))
-        _keys(
-            d,
-            {"schema", "parts"},
-            {"sensor_id", "created_utc", "library_version", "extra"},
-            "calibration",
-        )
-        parts = d["parts"]
+        v = _schema.check_fields(d, _schema.TOP_FIELDS, "calibration")
+        parts = v["parts"]
         if not isinstance(parts, Mapping):
             raise CalibrationError("'parts' must be a JSON object keyed by accel/gyro/mag")
-        unknown = set(parts) - set(SENSORS)
+        unknown = [str(k)[:40] for k in parts if k not in SENSORS]
         if unknown:
             raise CalibrationError(f"unknown sensor part(s) {sorted(unknown)}: use {SENSORS}")
         kw = {s: SensorCalibration.from_dict(parts[s], s) for s in SENSORS if s in parts}
-        extra = d.get("extra") or {}
-        if not isinstance(extra, Mapping):
-            raise CalibrationError("'extra' must be a JSON object")
         return cls(
             **kw,
-            sensor_id=d.get("sensor_id", ""),
-            created_utc=d.get("created_utc", ""),
-            library_version=d.get("library_version", ""),
-            extra=dict(extra),
+            sensor_id=v.get("sensor_id", ""),
+            created_utc=v.get("created_utc", ""),
+            library_version=v.get("library_version", ""),
+            extra=v.get("extra") or {},
         )
 
     @classmethod
     def from_json(cls, text: str) -> Calibration:
+        """Parse calibration JSON text (see :meth:`load`)."""
         try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
+            d = _schema.parse_json(text)
+        except CalibrationError as exc:
             raise CalibrationError(
-                f"not a calibration file: invalid JSON ({exc}); write it with cal.save(path) "
-                "or `triaxcal fit`"
+                f"not a calibration file: {exc}; write it with cal.save(path) or `triaxcal fit`"
             ) from None
         return cls.from_dict(d)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Calibration:
-        """Read a calibration file written by :meth:`save` (or by ``triaxcal fit``)."""
+        """Read a calibration file written by :meth:`save` (or by ``triaxcal fit``).
+
+        Every value is validated (see :mod:`triaxcal._schema`): numbers are finite numbers,
+        the matrix is invertible, the model is a known name, text is bounded and free of
+        control characters. Anything else -- a folder, a file that is not UTF-8 JSON, one
+        larger than 64 MB, nested too deeply -- raises :class:`CalibrationError`.
+        """
         p = Path(path)
+        data = read_bounded(p, limit=_schema.MAX_FILE_BYTES, what="calibration file")
         try:
-            text = p.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise CalibrationError(f"calibration file {p} not found") from None
-        except UnicodeDecodeError:
-            raise CalibrationError(f"{p} is not a text (JSON) calibration file") from None
+            text = data.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise CalibrationError(
+                f"{p} is not a calibration file: byte {exc.start} is not UTF-8 text (a "
+                "calibration file is JSON)"
+            ) from None
         try:
             return cls.from_json(text)
         except CalibrationError as exc:
             raise CalibrationError(f"{p}: {exc}") from None
 
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the calibration as JSON to ``path`` (atomically: temp file, then rename)."""
-        p = Path(path)
-        tmp = p.with_name(p.name + ".tmp")
-        tmp.write_text(self.to_json(), encoding="utf-8")
-        os.replace(tmp, p)
-        return p
+        """Write the calibration as JSON to ``path`` (atomically: temp file, then rename).
+
+        Raises :class:`CalibrationError` (saying why) when the file cannot be written.
+        """
+        return write_file(path, self.to_json(), what="calibration file")
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Calibration) and self.to_dict() == other.to_dict()

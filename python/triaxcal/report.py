@@ -6,13 +6,18 @@ For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T
 * the residual ``|calibrated| - radius``: RMS in calibrated units and in % of the radius;
 * min / max / mean / std of the calibrated norms (the seeds' "descriptive statistics");
 * the standard error of every fitted coefficient (``offset_x``... ``offdiag_yz``);
-* coverage of the sphere: the share of 100 equal-area cells (10 bands of equal height in z,
-  each cut into 10 equal longitude sectors -- by Archimedes' theorem every cell has the same
-  area) that hold at least one calibrated direction;
+* coverage of the sphere: the share of the equal-area cells of :mod:`triaxcal.coverage` (the
+  measure ``capture``, ``demo`` and ``fit`` report too) that hold at least one calibrated
+  direction, of every reading given (rejected ones too: coverage says where the board went);
 * the outliers rejected before the fit, by index;
-* warnings in plain language, each with what to do; the largest empty regions of the sphere
-  are found as the directions farthest from every reading and named in words ("the top of the
-  sphere (+Z) is empty").
+* warnings in plain language, each with what to do; the largest empty caps of the sphere
+  (found exactly, see :mod:`triaxcal._caps`) are named by their centre and radius ("no
+  reading within 41 deg of (-0.94, -0.26, -0.20), 19 deg from -X towards -Y");
+* for a magnetometer: the field the World Magnetic Model expects where it was calibrated
+  (total, horizontal, inclination, declination) beside the strength the readings show, its
+  alignment with the accelerometer (rotation, mounting, dip angle and its spread before and
+  after, the heading error on held-out poses), and for a yaw-only calibration what it
+  determines and what not (:func:`context_lines`).
 
 :func:`plot_report` draws raw and calibrated points in the XY, XZ and YZ projections with the
 fitted ellipse / circle, a histogram of residuals, the coverage map and the norms over time.
@@ -31,22 +36,28 @@ from typing import Any
 
 import numpy as np
 
+from . import _options as opt
+from ._caps import largest_empty_caps
 from ._validate import as_points
 from .calibration import SensorCalibration
+from .coverage import Coverage, coverage_warning, sphere_cells
+from .coverage import coverage as shared_coverage
 from .errors import CalibrationError
+from .units import per_unit
 
 __all__ = [
     "QualityReport",
+    "cap_words",
+    "context_lines",
     "coverage",
     "direction_words",
     "empty_regions",
     "have_matplotlib",
     "plot_report",
     "quality_report",
+    "report_figure",
 ]
 
-N_BANDS = 10
-N_SECTORS = 10
 #: An empty cap of the sphere at least this wide (angular radius, degrees) is warned about.
 HOLE_DEG = 40.0
 
@@ -65,36 +76,21 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n == 0, 1.0, n)
 
 
-def coverage(
-    directions: Any, *, n_bands: int = N_BANDS, n_sectors: int = N_SECTORS
-) -> tuple[np.ndarray, float]:
-    """Hits per equal-area cell and the percentage of cells hit.
+def coverage(directions: Any) -> tuple[np.ndarray, float]:
+    """Hits per equal-area cell and the percentage of cells hit (the measure every command
+    reports: :func:`triaxcal.coverage.coverage`).
 
-    Cells: ``n_bands`` bands of equal height in ``z`` (equal area on the unit sphere) times
-    ``n_sectors`` equal longitude sectors. ``directions`` (N, 3) need not be unit length.
+    ``directions`` (N, 3) need not be unit length.
 
     Returns
     -------
-    counts : ndarray, shape (n_bands, n_sectors)
-        Readings per cell; band 0 is the bottom (-Z), sector 0 starts at longitude -180 deg.
+    counts : ndarray, shape (n_cells,)
+        Readings per cell, numbered as :class:`triaxcal.coverage.SphereCells`.
     percent : float
         Share of cells with at least one reading, in %.
     """
-    u = _unit(as_points(directions, name="directions"))
-    band = np.clip(((u[:, 2] + 1.0) / 2.0 * n_bands).astype(int), 0, n_bands - 1)
-    lon = np.arctan2(u[:, 1], u[:, 0])
-    sector = np.clip(((lon + np.pi) / (2 * np.pi) * n_sectors).astype(int), 0, n_sectors - 1)
-    counts = np.zeros((n_bands, n_sectors), dtype=np.int64)
-    np.add.at(counts, (band, sector), 1)
-    return counts, 100.0 * float(np.count_nonzero(counts)) / counts.size
-
-
-def _fibonacci(n: int) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    r = np.sqrt(1 - z * z)
-    phi = i * math.pi * (3 - math.sqrt(5))
-    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+    cov = shared_coverage(directions)
+    return cov.counts, cov.percent
 
 
 def empty_regions(
@@ -102,30 +98,21 @@ def empty_regions(
 ) -> list[tuple[np.ndarray, float]]:
     """The largest empty caps of the sphere: ``[(centre unit vector, angular radius deg)]``.
 
-    The centre is the direction farthest (in angle) from every reading; the radius is that
-    angle. Further caps are searched away from the ones found. Only caps of at least
-    ``min_deg`` are returned, largest first.
+    The first is the largest cap that holds no reading (exact: its rim passes through three
+    readings); further caps are the largest centred more than 1.5 radii from the ones found.
+    Only caps of at least ``min_deg`` are returned, largest first.
+
+    >>> import numpy as np
+    >>> pts = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, -1.0]])
+    >>> [(c.round(3).tolist(), round(r, 3)) for c, r in empty_regions(pts, max_regions=1)]
+    [([0.0, 0.0, 1.0], 90.0)]
     """
-    u = _unit(as_points(directions, name="directions"))
-    cand = _fibonacci(4000)
-    # angular distance to the nearest reading, in chunks to bound memory
-    near = np.empty(len(cand))
-    for s in range(0, len(cand), 500):
-        dots = cand[s:s + 500] @ u.T
-        near[s:s + 500] = np.degrees(np.arccos(np.clip(dots.max(axis=1), -1, 1)))
-    out: list[tuple[np.ndarray, float]] = []
-    alive = np.ones(len(cand), dtype=bool)
-    for _ in range(max_regions):
-        if not alive.any():
-            break
-        i = int(np.argmax(np.where(alive, near, -1)))
-        ang = float(near[i])
-        if ang < min_deg:
-            break
-        out.append((cand[i].copy(), ang))
-        sep = np.degrees(np.arccos(np.clip(cand @ cand[i], -1, 1)))
-        alive &= sep > 1.5 * ang
-    return out
+    lo = opt.number(min_deg, "min_deg", ge=0, le=180, hint="degrees")
+    most = opt.integer(max_regions, "max_regions", ge=1, le=100)
+    pts = as_points(directions, name="directions")
+    if not np.isfinite(pts).all():
+        raise CalibrationError("directions contain NaN or inf; drop those readings first")
+    return largest_empty_caps(pts, min_deg=lo, max_regions=most)
 
 
 _AXIS_WORDS = {
@@ -157,6 +144,31 @@ def direction_words(v: Any) -> str:
     z = [s for k, s in names if k == 2]
     extra = f" ({_AXIS_WORDS[(2, z[0])]})" if z else ""
     return "between " + " and ".join(label) + extra
+
+
+def cap_words(centre: Any, radius_deg: float) -> str:
+    """Name an empty cap by its centre and radius, and say how far the centre is from the
+    nearest sensor axis.
+
+    >>> cap_words([-0.9435, -0.2647, -0.1992], 41.31)
+    'no reading within 41 deg of (-0.94, -0.26, -0.20), 19 deg from -X towards -Y'
+    >>> cap_words([0.0, 0.0, 1.0], 72.6)
+    'no reading within 73 deg of (+0.00, +0.00, +1.00), the +Z axis'
+    """
+    v = np.asarray(centre, dtype=float)
+    v = v / np.linalg.norm(v)
+    k = int(np.argmax(np.abs(v)))
+    axis = f"{'+' if v[k] > 0 else '-'}{'XYZ'[k]}"
+    off = math.degrees(math.acos(min(1.0, abs(float(v[k])))))
+    where = f"({v[0]:+.2f}, {v[1]:+.2f}, {v[2]:+.2f})"
+    if off < 1.0:
+        pos = f"the {axis} axis"
+    else:
+        rest = v.copy()
+        rest[k] = 0.0
+        j = int(np.argmax(np.abs(rest)))
+        pos = f"{off:.0f} deg from {axis} towards {'+' if v[j] > 0 else '-'}{'XYZ'[j]}"
+    return f"no reading within {radius_deg:.0f} deg of {where}, {pos}"
 
 
 def _axis_phrase(v: np.ndarray) -> str:
@@ -218,6 +230,8 @@ class QualityReport:
     model_reason: str | None = None
     raw_unit: str = "counts"
     extra: dict[str, Any] = field(default_factory=dict)
+    #: Bootstrap intervals (:meth:`triaxcal.methods.bootstrap.BootstrapIntervals.as_dict`).
+    intervals: dict[str, Any] | None = None
 
     @property
     def uniformity(self) -> float:
@@ -247,12 +261,22 @@ class QualityReport:
         ]
         if self.model_reason:
             lines.append(f"  model choice    {self.model_reason}")
+        lines += self.extra.get("context", [])
+        ci = (self.intervals or {}).get("coefficients") or {}
         if self.stderr:
-            lines.append("  standard errors")
+            lines.append("  standard errors" + (
+                f" and {round(100 * self.intervals['level'])} % bootstrap intervals "
+                f"({self.intervals['n_boot']} refits over {self.intervals['resample']})"
+                if ci and self.intervals else ""))
             for k, v in self.stderr.items():
                 unit = (self.raw_unit if k.startswith("offset") or k == "data_radius"
-                        else f"{u}/{self.raw_unit}" if u != self.raw_unit else "(ratio)")
-                lines.append(f"    {k:<12} {v:.3g} {unit}")
+                        else per_unit(u, self.raw_unit, short=True))
+                c = ci.get(k)
+                band = "" if c is None else (
+                    f"   [{c['lower']:.6g}, {c['upper']:.6g}]"
+                    + ("  <- wider than firmware needs" if (c["upper"] - c["lower"]) / 2
+                       > c["tolerance"] else ""))
+                lines.append(f"    {k:<12} {v:.3g} {unit}{band}")
         if self.rejected:
             shown = ", ".join(str(i) for i in self.rejected[:30])
             more = f", ... ({len(self.rejected)} in all)" if len(self.rejected) > 30 else ""
@@ -286,6 +310,7 @@ def quality_report(
     rejected: Sequence[int] | None = None,
     model_reason: str | None = None,
     temperature: Any = None,
+    intervals: Any = None,
 ) -> QualityReport:
     """Build the :class:`QualityReport` of calibration ``cal`` on raw readings ``points``.
 
@@ -304,6 +329,9 @@ def quality_report(
         Why the model was chosen (from :func:`triaxcal.select.fit_auto`).
     temperature : float or array_like, optional
         Temperatures (deg C) for parts with temperature terms.
+    intervals : BootstrapIntervals or dict, optional
+        Bootstrap intervals of the coefficients (:func:`triaxcal.bootstrap`), shown beside the
+        standard errors; wide ones are warned about. Default: ``cal.stats["intervals"]``.
 
     Returns
     -------
@@ -312,6 +340,16 @@ def quality_report(
     pts = as_points(points)
     part, fit = _resolve(cal)
     n = len(pts)
+    _check_sensor(sensor)
+    if model_reason is not None and not isinstance(model_reason, str):
+        raise CalibrationError(f"model_reason must be text or None, got {model_reason!r}")
+    if rejected is not None:
+        if isinstance(rejected, (str, bytes)) or not hasattr(rejected, "__iter__"):
+            raise CalibrationError(
+                f"rejected must be a sequence of reading indices, got {rejected!r}"
+            )
+        rejected = [opt.integer(i, "rejected index", ge=0, le=max(n - 1, 0))
+                    for i in rejected]
     if rejected is None:
         rej = part.stats.get("rejected") or []
         used = part.stats.get("n")
@@ -334,12 +372,22 @@ def quality_report(
     radius = part.radius if part.radius is not None else float(np.mean(nk))
     res = nk - radius
     rms = float(np.sqrt(np.mean(res**2)))
-    counts, cov = coverage(cal_pts[keep])
+    cov = shared_coverage(cal_pts)  # of the session: rejected readings were visited too
     holes = empty_regions(cal_pts[keep])
     stderr = dict(part.stats.get("stderr") or {})
     if fit is not None:
         stderr = fit.stderr_dict
     warnings = _warnings(part, fit, sensor, n, rej, rms / radius * 100, cov, holes, nk)
+    if intervals is None:
+        intervals = part.stats.get("intervals")
+    elif hasattr(intervals, "as_dict"):
+        intervals = intervals.as_dict()
+    if intervals is not None:
+        if not isinstance(intervals, dict) or not isinstance(intervals.get("coefficients"), dict):
+            raise CalibrationError("intervals must come from triaxcal.bootstrap")
+        warnings += [w for w in intervals.get("warnings", []) if w not in warnings]
+    if part.model == "yaw":  # turns about the vertical cover a band of the sphere, on purpose
+        warnings = [w for w in warnings if "sphere" not in w]
     return QualityReport(
         sensor=sensor,
         unit=part.unit,
@@ -355,29 +403,87 @@ def quality_report(
         norm_mean=float(nk.mean()),
         norm_std=float(nk.std(ddof=1)),
         stderr={k: float(v) for k, v in stderr.items()},
-        coverage_pct=cov,
-        cells_hit=int(np.count_nonzero(counts)),
-        cells_total=int(counts.size),
-        empty=[(c.tolist(), a, direction_words(c)) for c, a in holes],
+        coverage_pct=cov.percent,
+        cells_hit=cov.cells_hit,
+        cells_total=cov.n_cells,
+        empty=[(c.tolist(), a, cap_words(c, a)) for c, a in holes],
         rejected=rej,
         warnings=warnings,
         model_reason=model_reason or part.stats.get("model_reason"),
+        intervals=intervals,
+        extra={"context": context_lines(part)},
     )
 
 
+SENSORS = ("accel", "gyro", "mag")
+
+
+def _check_sensor(sensor: Any) -> None:
+    if sensor is not None and (not isinstance(sensor, str) or sensor not in SENSORS):
+        raise CalibrationError(
+            f"sensor must be None or one of {', '.join(repr(x) for x in SENSORS)}, got "
+            f"{sensor!r}"
+        )
+
+
+def context_lines(part: SensorCalibration) -> list[str]:
+    """Report lines on a magnetometer's surroundings: the expected field, the alignment with
+    the accelerometer and the heading check, a yaw-only calibration's limits (empty for
+    other parts)."""
+    lines: list[str] = []
+    f = part.expected_field
+    if f is not None:
+        lines.append(f"  expected field  {f.model} at {f.lat_deg:.4f}, {f.lon_deg:.4f}, "
+                     f"{f.alt_m:.0f} m on {f.date}:")
+        lines.append(f"                  total {f.total_ut:.2f} uT, horizontal "
+                     f"{f.horizontal_ut:.2f} uT, inclination {f.inclination_deg:.2f} deg, "
+                     f"declination {f.declination_deg:.2f} deg")
+        shown = part.stats.get("field_strength_ut")
+        if shown is not None:
+            what = "horizontal" if part.model == "yaw" else "total"
+            ref = f.horizontal_ut if part.model == "yaw" else f.total_ut
+            lines.append(f"                  the readings show {shown:.4g} uT {what} "
+                         f"({100 * (shown / ref - 1):+.1f} %)")
+        elif part.raw_unit == "counts":
+            lines.append("                  (raw counts: their strength is not compared; "
+                         "--raw-unit names a physical unit)")
+    al = part.alignment
+    if al is not None:
+        st = al.stats
+        from .rotations import rotation_angle_deg
+
+        mnt = (f"{al.mounting} + {al.mounting_residual_deg:.2f} deg" if al.mounting
+               else "not a right-angle mounting")
+        ang = rotation_angle_deg(al.rotation)
+        lines.append(f"  alignment       into the {al.to} frame: {ang:.2f} deg ({mnt})")
+        if "dip_deg" in st:
+            lines.append(f"                  dip {st['dip_deg']:.2f} deg; spread over "
+                         f"{st.get('n_fit', '?')} poses {st['dip_std_before_deg']:.3f} deg "
+                         f"before, {st['dip_std_after_deg']:.3f} deg after")
+        if st.get("heading_rms_est_deg") is not None:
+            lines.append(f"  heading check   {st['n_heldout']} held-out poses: dip spread "
+                         f"{st['dip_std_heldout_before_deg']:.3f} -> "
+                         f"{st['dip_std_heldout_after_deg']:.3f} deg; heading error about "
+                         f"{st['heading_rms_est_deg']:.2f} deg rms (from the dip residuals)")
+    y = part.stats.get("yaw")
+    if isinstance(y, dict) and "determined" in y:
+        from .methods.yaw import yaw_text
+
+        lines += ["  " + ln for ln in yaw_text(y, part.unit).splitlines()]
+    return lines
+
+
 def _warnings(part: SensorCalibration, fit: Any, sensor: str | None, n: int, rej: list[int],
-              rms_pct: float, cov: float, holes: list, norms: np.ndarray) -> list[str]:
+              rms_pct: float, cov: Coverage, holes: list, norms: np.ndarray) -> list[str]:
     w: list[str] = []
     for c, ang in holes:
         w.append(
-            f"{direction_words(c)} of the sphere is empty (no reading within {ang:.0f} deg of "
-            f"it): {_hole_action(sensor, c)}, then fit again"
+            f"the sphere has an empty cap ({cap_words(c, ang)}): {_hole_action(sensor, c)}, "
+            "then fit again"
         )
-    if cov < 50:
-        w.append(
-            f"only {cov:.0f} % of the sphere is covered: tumble the board through many more "
-            "orientations (all six faces up and the corners in between)"
-        )
+    low = coverage_warning(cov, sensor)
+    if low:
+        w.append(low)
     if n - len(rej) < 30:
         w.append(
             f"only {n - len(rej)} readings were used: collect at least 30 (better 100+) spread "
@@ -435,6 +541,33 @@ def _ellipse(part: SensorCalibration, radius: float, i: int, j: int) -> np.ndarr
     return v @ (circ / np.sqrt(w)[:, None]) + part.offset[idx][:, None]
 
 
+def _cap_outline(centre: np.ndarray, radius_deg: float) -> np.ndarray:
+    """The rim of a cap in the coverage map's (longitude deg, z) coordinates, (2, K), with
+    NaN where it wraps around at +-180 deg."""
+    c = centre / np.linalg.norm(centre)
+    a = np.array([1.0, 0.0, 0.0]) if abs(c[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(c, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(c, e1)
+    t = np.linspace(0, 2 * np.pi, 361)
+    rr = math.radians(radius_deg)
+    pts = (math.cos(rr) * c[None] + math.sin(rr) * (np.cos(t)[:, None] * e1
+                                                      + np.sin(t)[:, None] * e2))
+    lon = np.degrees(np.arctan2(pts[:, 1], pts[:, 0]))
+    z = pts[:, 2].copy()
+    jump = np.flatnonzero(np.abs(np.diff(lon)) > 180) + 1
+    lon = np.insert(lon, jump, np.nan)
+    z = np.insert(z, jump, np.nan)
+    return np.vstack([lon, z])
+
+
+def _empty_legend() -> Any:
+    from matplotlib.lines import Line2D
+
+    return Line2D([], [], color="#d62728", ls="--", marker="*", mec="k", ms=10,
+                  label="largest empty cap (rim)")
+
+
 def plot_report(
     points: Any,
     cal: Any,
@@ -461,11 +594,47 @@ def plot_report(
         raise CalibrationError(
             "the report figure needs matplotlib: pip install 'triaxcal[plot]' (or matplotlib)"
         )
+    dots = opt.integer(dpi, "dpi", ge=20, le=600, hint="dots per inch of the PNG")
+    fig = report_figure(points, cal, report=report, sensor=sensor, title=title, dpi=dots)
+    out = Path(path)
+    fig.savefig(out, format="png", dpi=dots)
+    return out
+
+
+def report_figure(
+    points: Any,
+    cal: Any,
+    *,
+    report: QualityReport | None = None,
+    sensor: str | None = None,
+    title: str | None = None,
+    dpi: int = 80,
+) -> Any:
+    """The report figure of :func:`plot_report` as a matplotlib ``Figure`` (not saved).
+
+    Raises
+    ------
+    CalibrationError
+        If matplotlib (the ``plot`` extra) is not installed.
+    """
+    if not have_matplotlib():
+        raise CalibrationError(
+            "the report figure needs matplotlib: pip install 'triaxcal[plot]' (or matplotlib)"
+        )
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
+    dpi = opt.integer(dpi, "dpi", ge=20, le=600, hint="dots per inch of the PNG")
+    _check_sensor(sensor)
+    if title is not None and not isinstance(title, str):
+        raise CalibrationError(f"title must be text or None, got {title!r}")
+    if report is not None and not isinstance(report, QualityReport):
+        raise CalibrationError(
+            f"report must be a QualityReport (triaxcal.quality_report) or None, got "
+            f"{type(report).__name__}"
+        )
     pts = as_points(points)
     part, _ = _resolve(cal)
     rep = report if report is not None else quality_report(pts, cal, sensor=sensor)
@@ -478,6 +647,8 @@ def plot_report(
     u, ru = part.unit, part.raw_unit
 
     fig = Figure(figsize=(13, 12.5), dpi=dpi, layout="constrained")
+    engine: Any = fig.get_layout_engine()
+    engine.set(wspace=0.06)  # room between the colour bar and the next panel
     gs = fig.add_gridspec(3, 3)
     name = rep.sensor or sensor or "sensor"
     fig.suptitle(
@@ -525,7 +696,9 @@ def plot_report(
             fig.legend(handles[0] + h2[0][-1:], handles[1] + h2[1][-1:],
                        loc="outside lower center", ncol=5, fontsize=10, frameon=False)
 
-    # residual histogram
+    # residual histogram: at most 5 ticks, the common power of ten written once at the axis end
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
     ax = fig.add_subplot(gs[2, 0])
     res_in = norms[keep] - r
     bins = np.histogram_bin_edges(norms - r, bins=40).tolist()
@@ -533,6 +706,11 @@ def plot_report(
     if (~keep).any():
         ax.hist(norms[~keep] - r, bins=bins, color="#d62728", alpha=0.8, label="rejected")
     ax.axvline(0, color="k", lw=0.8)
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=5, symmetric=True))
+    fmt = ScalarFormatter(useMathText=True)
+    fmt.set_powerlimits((-2, 3))
+    ax.xaxis.set_major_formatter(fmt)
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(f"residual |calibrated| - radius ({u})")
     ax.set_ylabel("readings")
     ax.set_title(f"residuals: RMS {rep.rms:.3g} {u}, std/mean of |v| "
@@ -542,27 +720,43 @@ def plot_report(
 
     # coverage map: Lambert cylindrical equal-area (x = longitude, y = z), cells are rectangles
     ax = fig.add_subplot(gs[2, 1])
-    cu = _unit(c[keep])
+    cu = _unit(c)  # every reading, as the coverage number
     counts, _ = coverage(cu)
-    lon_edges = np.linspace(-180, 180, N_SECTORS + 1)
-    z_edges = np.linspace(-1, 1, N_BANDS + 1)
-    shown = np.where(counts > 0, np.log1p(counts), np.nan)
     import matplotlib.colors as mcolors
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.patches import Patch, Rectangle
 
-    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="#d9d9d9")
-    ax.pcolormesh(lon_edges, z_edges, np.ma.masked_invalid(shown), cmap=cmap,
-                  norm=mcolors.Normalize(vmin=0, vmax=max(np.nanmax(shown), 1.0)),
-                  edgecolors="white", linewidth=0.6)
+    cmap = matplotlib.colormaps["viridis"]
+    top = int(counts.max()) if counts.size else 1
+    cnorm = mcolors.Normalize(vmin=math.log1p(1), vmax=max(math.log1p(top), math.log1p(2)))
+    for n_hits, (lo, hi, z_lo, z_hi) in zip(counts.tolist(), sphere_cells().rectangles()):
+        face = "#d9d9d9" if n_hits == 0 else cmap(cnorm(math.log1p(n_hits)))
+        for shift in (0.0, -360.0):  # a cell that runs past +180 deg shows on both edges
+            ax.add_patch(Rectangle((lo + shift, z_lo), hi - lo, z_hi - z_lo, facecolor=face,
+                                   edgecolor="white", linewidth=0.6))
+    ticks = [t for t in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
+             if t <= max(top, 1)]
+    cbar = fig.colorbar(ScalarMappable(norm=cnorm, cmap=cmap), ax=ax,
+                        ticks=[math.log1p(t) for t in ticks], pad=0.02, fraction=0.06)
+    cbar.ax.set_yticklabels([str(t) for t in ticks])
+    cbar.set_label("readings per cell")
     ax.scatter(np.degrees(np.arctan2(cu[:, 1], cu[:, 0])), cu[:, 2], s=4, c="k", alpha=0.5)
-    for cen, _ang, words in rep.empty:
-        lon = float(np.degrees(np.arctan2(cen[1], cen[0])))
-        ax.plot(lon, cen[2], marker="*", ms=18, color="#d62728", mec="k", ls="none",
+    for cen, ang, _words in rep.empty:
+        cv = np.asarray(cen, dtype=float)
+        lon = float(np.degrees(np.arctan2(cv[1], cv[0])))
+        ax.plot(lon, cv[2], marker="*", ms=16, color="#d62728", mec="k", ls="none",
                 clip_on=False)
-        ax.annotate(f"empty: {words}", (lon, cen[2]), textcoords="offset points",
-                    xytext=(-8 if lon > 60 else 8, 8), ha="right" if lon > 60 else "left",
-                    fontsize=9, color="#d62728",
+        rim = _cap_outline(cv, ang)
+        ax.plot(rim[0], rim[1], color="#d62728", lw=1.4, ls="--")
+        ax.annotate(f"empty cap, radius {ang:.0f} deg", (lon, cv[2]),
+                    textcoords="offset points", xytext=(-8 if lon > 60 else 8, 8),
+                    ha="right" if lon > 60 else "left", fontsize=9, color="#d62728",
                     bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#d62728",
                           "alpha": 0.9})
+    keys: list[Any] = [Patch(facecolor="#d9d9d9", edgecolor="white", label="no reading")]
+    if rep.empty:
+        keys.append(_empty_legend())
+    ax.legend(handles=keys, loc="lower left", fontsize=8, framealpha=0.9)
     ax.set_xlim(-180, 180)
     ax.set_ylim(-1, 1)
     ax.set_xticks([-180, -90, 0, 90, 180])
@@ -572,7 +766,7 @@ def plot_report(
     ax.set_xlabel("longitude (direction in the XY plane)")
     ax.set_ylabel("z component (equal-area)")
     ax.set_title(f"coverage {rep.coverage_pct:.0f} % ({rep.cells_hit}/{rep.cells_total} "
-                 "cells; grey = empty)")
+                 "equal-area cells)")
 
     # norms over time
     ax = fig.add_subplot(gs[2, 2])
@@ -587,6 +781,4 @@ def plot_report(
     ax.set_title("|calibrated| per reading (x: rejected)")
     ax.grid(alpha=0.3)
 
-    out = Path(path)
-    fig.savefig(out, format="png", dpi=dpi)
-    return out
+    return fig

@@ -2,6 +2,7 @@
 //! numpy arrays, releases the GIL, calls the core, and returns plain values; the Python facade
 //! (`python/triaxcal/`) validates input first and builds the result objects.
 
+mod allan;
 mod errors;
 
 use crate::batch;
@@ -298,5 +299,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_ellipsoid, m)?)?;
     m.add_function(wrap_pyfunction!(fit_batch, m)?)?;
     m.add_function(wrap_pyfunction!(apply, m)?)?;
+    m.add_class::<allan::AllanStream>()?;
     Ok(())
 }

@@ -10,9 +10,12 @@ from typing import Sequence
 
 from .. import __version__
 from ..errors import CalibrationError
+from ..io.files import os_error_message
+from ._help import PlainHelpFormatter
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("demo", "capture", "fit", "export", "report", "send")
+COMMANDS = ("demo", "capture", "fit", "batch", "export", "report", "send", "sphere_center",
+            "tilt_rig", "gyro_gains", "temperature", "noise", "diff")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,6 +33,8 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         mod.register(sub)
+    for command in sub.choices.values():  # plain text, defaults shown, for every command
+        command.formatter_class = PlainHelpFormatter
     return parser
 
 
@@ -43,6 +48,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except CalibrationError as exc:
         print(f"triaxcal {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a file problem no command turned into a message of its own
+        where = exc.filename if exc.filename is not None else "a file"
+        print(f"triaxcal {args.command}: error: {os_error_message(exc, where)}",
+              file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"triaxcal {args.command}: interrupted", file=sys.stderr)

@@ -19,7 +19,7 @@ from ..errors import CalibrationError
 from ..io.logs import is_log, read_log
 from ..io.recording import LogRecording
 
-__all__ = ["Source", "add_source_options", "autopilot_lines", "load_source"]
+__all__ = ["Source", "add_source_options", "autopilot_lines", "load_source", "table_source"]
 
 _G = {"m/s^2": 9.80665, "g": 1.0, "mg": 1000.0}
 
@@ -66,6 +66,25 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
+    """Readings of ``sensor`` from a table already read (:func:`triaxcal.io.tables.read_table`):
+    the table half of :func:`load_source` (``triaxcal batch`` fits each board so)."""
+    from ..io.tables import pick_columns
+    from ..poses import pose_points
+    from ._poses import settings_from_args
+
+    cols = pick_columns(table, getattr(args, "columns", None), sensor)
+    pose_stats: dict[str, Any] = {}
+    board = table.names is not None and "pose_n" in table.names  # rows are pose means
+    if getattr(args, "poses", False) or board:  # the capture's pose detection, every sensor
+        pts, pose_stats = pose_points(table, cols, settings_from_args(args))
+    else:
+        pts = table.data[:, cols]
+    return Source(points=pts, path=table.path, sha256=table.sha256, table=table,
+                  columns=[table.names[c] if table.names else c for c in cols],
+                  extra=pose_stats)
+
+
 def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Source:
     """Readings of ``sensor`` from ``path`` as ``args`` (``--columns``, ``--poses``, the log
     options) ask; the same for ``fit``, ``report`` and every command that takes a session."""
@@ -79,14 +98,10 @@ def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Sour
                 f"--instance, --topic and --undo-autopilot-cal apply to logs (.ulg, .bin, .bag, "
                 f".db3, .mcap); {p} is read as a table"
             )
-        from .fit import _pose_points, pick_columns, read_table
+        from ..io.tables import read_table
 
-        table = read_table(p)
-        cols = pick_columns(table, getattr(args, "columns", None), sensor)
-        pts = _pose_points(table, cols, args) if getattr(args, "poses", False) else \
-            table.data[:, cols]
-        return Source(points=pts, path=p, sha256=table.sha256, table=table,
-                      columns=[table.names[c] if table.names else c for c in cols])
+        table = read_table(p, skip_bad_lines=bool(getattr(args, "skip_bad_lines", False)))
+        return table_source(table, sensor, args)
     if getattr(args, "columns", None):
         raise CalibrationError(f"--columns applies to tables; {p} is a log: choose the sensor "
                                "with --sensor (and --instance / --topic)")
@@ -102,33 +117,49 @@ def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Sour
         "rate_hz": stream.rate_hz,
     }}
     if getattr(args, "poses", False):
-        pts = _log_pose_points(rec, sensor, args)
+        pts, pose_stats = _log_pose_points(rec, sensor, args)
+        extra.update(pose_stats)
     return Source(points=pts, path=p, sha256=file_sha256(p), raw_unit=stream.unit,
                   columns=[f"{stream.name}:{sensor}"], recording=rec, extra=extra)
 
 
-def _log_pose_points(rec: LogRecording, sensor: str, args: argparse.Namespace) -> np.ndarray:
-    """Still-pose means of ``sensor``, poses found on the accelerometer stream."""
-    from ..detect import detect_poses
+def _log_pose_points(
+    rec: LogRecording, sensor: str, args: argparse.Namespace
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Still-pose means of ``sensor``, poses found as ``triaxcal capture`` finds them: a pose
+    ends when the accelerometer, the gyroscope (when the log has one) or the magnetometer (when
+    it is the sensor fitted) says the vehicle moved."""
+    from dataclasses import replace
+
+    from ..poses import SENSOR_NAMES, session_poses
+    from ._poses import settings_from_args
 
     acc = rec.stream("accel")
     per_g = _G.get(acc.unit)
     if per_g is None:
         raise CalibrationError(f"--poses needs the accelerometer in g or m/s^2; the log's is in "
                                f"{acc.unit}")
-    if sensor == "accel":
+    wanted = ("accel", *(s for s in ("gyro", "mag") if s in rec.sensors and
+                         (s == "gyro" or s == sensor)))
+    if wanted == ("accel",):
         data = acc.data
     else:
-        _, sync = rec.synchronized(("accel", sensor))
-        data = np.hstack([sync["accel"], sync[sensor]])
-    det = detect_poses(data, window=args.window, units_per_g=per_g, columns=(0, 1, 2))
+        _, sync = rec.synchronized(wanted)
+        data = np.hstack([sync[s] for s in wanted])
+    names = tuple(n for s in wanted for n in SENSOR_NAMES[s])
+    settings = replace(settings_from_args(args), counts_per_g=per_g)
+    det, how = session_poses(names, data, settings)
     if len(det.poses) == 0:
         raise CalibrationError(
             f"no still poses found in {rec.source} (window {args.window} samples): the vehicle "
             "must rest in each pose for a while, or drop --poses"
         )
-    cols = [0, 1, 2] if sensor == "accel" else [3, 4, 5]
-    return np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
+    i = wanted.index(sensor)
+    cols = [3 * i, 3 * i + 1, 3 * i + 2]
+    stats = {"poses": True, "n_poses": len(det.poses),
+             "pose_detection": settings.with_resolved(how).to_dict(),
+             "pose_sensors": list(how.sensors)}
+    return np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64), stats
 
 
 def autopilot_lines(src: Source, sensor: str, offset: Any, matrix: Any, unit: str) -> list[str]:

@@ -18,7 +18,8 @@ from typing import Any
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
-from ..export import DEVICE_COUNTS_PER_UNIT, EXPORT_FORMATS, export
+from ..export import DEVICE_COUNTS_PER_UNIT, EXPORT_FORMATS, export, motioncal_losses
+from ..io.files import check_output, read_bounded
 
 
 def _scale(text: str) -> tuple[str, tuple[float, str]]:
@@ -43,8 +44,12 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("calibration", metavar="CAL.json")
-    p.add_argument("--format", required=True, choices=EXPORT_FORMATS, dest="fmt")
+    p.add_argument("calibration", metavar="CAL.json",
+                   help="calibration file written by triaxcal fit (or Calibration.save)")
+    p.add_argument("--format", required=True, choices=EXPORT_FORMATS, dest="fmt",
+                   help="c: C99 header, float; c-fixed: C99 header, integers only (Q7.24); "
+                        "json: the calibration file, validated and rewritten; motioncal: the "
+                        "68-byte PJRC MotionCal packet")
     p.add_argument("--prefix", default="triaxcal",
                    help="C identifier prefix: imu gives IMU_ACCEL_OFFSET_X, imu_accel_apply")
     p.add_argument("--counts-per-unit", type=_scale, action="append", default=[],
@@ -72,13 +77,20 @@ def register(subparsers: Any) -> None:
                         "gyroscope_random_walk")
     g.add_argument("--kalibr-model", default="scale-misalignment",
                    choices=("scale-misalignment", "calibrated"), help="kalibr: IMU model")
-    p.add_argument("-o", "--output", required=True, metavar="FILE")
+    p.add_argument("--offsets-only", action="store_true",
+                   help="motioncal: accept that the packet carries the accelerometer's and "
+                        "gyroscope's offsets but not their gains or any temperature terms "
+                        "(without it such a calibration is refused, naming what would be lost)")
+    p.add_argument("--no-alignment", action="store_true",
+                   help="leave the magnetometer-to-accelerometer alignment out on purpose (for "
+                        "a format that cannot hold it: motioncal, or a non-right-angle one)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE",
+                   help="file to write (replaced whole; its folder must exist)")
     p.set_defaults(func=run)
 
 
 def _param_options(args: argparse.Namespace) -> dict[str, Any]:
     """The options of the parameter formats, checked."""
-    import json
 
     fmt = args.fmt
     opts: dict[str, Any] = {}
@@ -120,10 +132,13 @@ def _param_options(args: argparse.Namespace) -> dict[str, Any]:
             raise CalibrationError("kalibr needs the IMU rate: pass --rate HZ")
         opts.update(topic=args.topic, rate_hz=args.rate, model=args.kalibr_model)
         if args.noise:
+            from .._schema import parse_json
+
+            raw = read_bounded(args.noise, limit=1 << 20, what="noise file")
             try:
-                opts["noise"] = json.loads(Path(args.noise).read_text(encoding="utf-8"))
-            except (OSError, ValueError) as exc:
-                raise CalibrationError(f"--noise {args.noise}: not a readable JSON file "
+                opts["noise"] = parse_json(raw.decode("utf-8-sig"))
+            except (UnicodeDecodeError, CalibrationError) as exc:
+                raise CalibrationError(f"--noise {args.noise}: not a JSON file "
                                        f"({exc})") from None
     used = {"ardupilot": ("sensors", "instance", "compass_scale"),
             "px4": ("sensors", "instance", "device_id"),
@@ -141,12 +156,21 @@ def _param_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = check_output(args.output, "export")
     cal = Calibration.load(args.calibration)
-    out = Path(args.output)
+    if getattr(args, "no_alignment", False):
+        cal = cal.replace(**{s: cal.part(s).replace(alignment=None) for s in cal.sensors})
     if out.resolve() == Path(args.calibration).resolve():
         raise CalibrationError("-o must differ from the calibration file")
+    if args.offsets_only and args.fmt != "motioncal":
+        raise CalibrationError(f"--offsets-only applies to --format motioncal, not {args.fmt}")
     export(cal, args.fmt, out, prefix=args.prefix,
-           counts_per_unit=dict(args.counts_per_unit) or None, **_param_options(args))
-    print(f"wrote {out} ({args.fmt}, {out.stat().st_size} bytes; sensors: "
-          f"{', '.join(cal.sensors)})")
+           counts_per_unit=dict(args.counts_per_unit) or None, offsets_only=args.offsets_only,
+           **_param_options(args))
+    if args.fmt == "motioncal":
+        for lost in motioncal_losses(cal, counts_per_unit=dict(args.counts_per_unit) or None):
+            print(f"  not in the packet: {lost}")
+    size = out.stat().st_size if out.is_file() else None
+    print(f"wrote {out} ({args.fmt}" + (f", {size} bytes" if size is not None else "")
+          + f"; sensors: {', '.join(cal.sensors)})")
     return 0

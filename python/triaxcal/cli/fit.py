@@ -2,43 +2,82 @@
 [--radius ...] -o CAL.json``: fit one sensor's readings and write (or update) a calibration file.
 
 Input: a session CSV from ``triaxcal capture`` (header ``t,ax,ay,az,...``) or any table of
-numbers -- comma, semicolon, tab or space separated, with or without a header row (detected);
-or a log: PX4 ``.ulg``, ArduPilot ``.bin``, ROS ``.bag`` / ``.db3`` / ``.mcap`` (``--instance``,
-``--topic``, ``--undo-autopilot-cal``; the raw unit is the log's).
-``--columns`` picks three columns by name or zero-based index (``ax,ay,az`` or ``0,1,2``);
-by default the sensor's named columns, or the first three of a headerless file. ``--poses``
-first reduces a raw time series to still-pose means (:func:`triaxcal.detect.detect_poses`).
-Outliers are rejected by the iterated 2-sigma rule on vector lengths (``--sigma 0`` disables).
+numbers -- comma, semicolon, tab or space separated, with or without a header row (detected),
+read by :func:`triaxcal.io.tables.read_table`; or a log: PX4 ``.ulg``, ArduPilot ``.bin``, ROS
+``.bag`` / ``.db3`` / ``.mcap`` (``--instance``, ``--topic``, ``--undo-autopilot-cal``; the raw
+unit is the log's). ``--columns`` picks three columns by name or zero-based index
+(``ax,ay,az`` or ``0,1,2``); by default the sensor's named columns, or the first three of a
+headerless file. ``--poses`` first reduces a raw time series to still-pose means, a pose
+ending when any sensor says the board moved, exactly as ``triaxcal capture`` counted them
+(:func:`triaxcal.poses.session_poses`). Outliers are rejected by the iterated 2-sigma rule on
+vector lengths (``--sigma 0`` disables).
+
+A fit that did not converge, or whose readings cover too little of the sphere to determine
+its model, is not written: the command exits with status 2 and says what to record instead
+(``--force`` writes it anyway, with the warning kept in the file's statistics).
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import math
 import re
 import sys
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..calibration import SENSORS, Calibration, SensorCalibration
+from ..coverage import coverage, coverage_warning
 from ..errors import CalibrationError
+from ..field import ExpectedField
 from ..fit import MODELS
-from ._source import Source, add_source_options, autopilot_lines, autopilot_stats, load_source
+from ..io.akm import apply_asa, asa_factors
+from ..io.files import check_output
+from ..io.tables import SENSOR_COLUMNS, Table, pick_columns, read_table
+from ..parts import fold_asa
+from ..units import implausible_radius, unit_factor
+from ._field import add_field_options, alignment_for, expected_from_args, field_stats, yaw_part
+from ._poses import add_pose_options
+from ._source import (
+    Source,
+    add_source_options,
+    autopilot_lines,
+    autopilot_stats,
+    load_source,
+    table_source,
+)
 
-#: Default column names per sensor (the device channel order,
-#: :data:`triaxcal.io.protocol.CHANNELS_10`).
-SENSOR_COLUMNS = {"accel": ("ax", "ay", "az"), "gyro": ("gx", "gy", "gz"),
-                  "mag": ("mx", "my", "mz")}
+__all__ = ["SENSOR_COLUMNS", "Table", "parse_radius", "pick_columns", "read_table"]
+
 #: Default radius per sensor when --radius is not given (None: keep the data's own scale).
 DEFAULT_RADIUS = {"accel": (1.0, "g"), "gyro": None, "mag": None}
 
 _UNITS_EXACT = ("g", "mg", "m/s^2", "uT", "nT", "mT", "gauss", "mG", "deg/s", "rad/s", "counts")
 _UNIT_ALIASES = {"m/s2": "m/s^2", "mps2": "m/s^2", "ut": "uT", "µt": "uT", "dps": "deg/s",
                  "lsb": "counts", "G": "gauss"}
+
+#: A fit is not written when its calibrated directions all lie within a cap this small
+#: (length of their mean unit vector: 0 for readings all round the sphere, 1 for one point;
+#: 0.9 is a cap of about 37 deg radius) ...
+MAX_MEAN_DIRECTION = 0.9
+#: ... or in a band this thin (smallest eigenvalue of mean(d d^T): 1/3 for readings all
+#: round the sphere or the six faces, 0 for a ring about one axis).
+MIN_DIRECTION_SPREAD = 0.02
+
+#: What to record instead, per sensor, when a fit is refused.
+RECORD_INSTEAD = {
+    "accel": "hold the board still in many orientations -- at least each of the six faces "
+             "up in turn, better 20 or more spread over the sphere (triaxcal capture says "
+             "which way to turn next) -- and fit the still poses with --poses",
+    "mag": "turn the board slowly through every orientation (upside down and onto each "
+           "side, e.g. figure eights), away from steel, magnets and currents",
+    "gyro": "a sphere fit of gyroscope readings needs turns at one constant rate about many "
+            "axes (a turntable); for the gyroscope bias record the board lying still and use "
+            "triaxcal.gyro_bias, for its gains record turns of known angle (e.g. 360 deg "
+            "about each axis, both ways) and use triaxcal.gyro_gains",
+}
 
 
 def parse_radius(text: str, sensor: str) -> tuple[float, str]:
@@ -79,126 +118,20 @@ def parse_radius(text: str, sensor: str) -> tuple[float, str]:
 
 
 # --------------------------------------------------------------------------------------------
-# Reading tables
-
-
-@dataclass(frozen=True)
-class Table:
-    """A numeric table read from a file: ``names`` (None without a header) and ``data``."""
-
-    names: tuple[str, ...] | None
-    data: np.ndarray
-    path: Path
-    sha256: str
-
-
-def _split(line: str, delim: str | None) -> list[str]:
-    if delim is None:
-        return line.split()
-    return [t.strip() for t in line.split(delim)]
-
-
-def _is_number(tok: str) -> bool:
-    try:
-        float(tok)
-    except ValueError:
-        return False
-    return True
-
-
-def read_table(path: str | Path) -> Table:
-    """Read a CSV / whitespace table; the header row and the delimiter are detected.
-
-    Lines starting with ``#`` and blank lines are skipped. Raises :class:`CalibrationError`
-    with the line number when a row is not numbers.
-    """
-    p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise CalibrationError(f"data file {p} not found") from None
-    text = raw.decode("utf-8", errors="replace")
-    lines = [(i + 1, ln.strip()) for i, ln in enumerate(text.splitlines())]
-    lines = [(i, ln) for i, ln in lines if ln and not ln.startswith("#")]
-    if not lines:
-        raise CalibrationError(f"{p} holds no data rows")
-    first = lines[0][1]
-    delim: str | None = None
-    for d in (",", ";", "\t"):
-        if d in first:
-            delim = d
-            break
-    names: tuple[str, ...] | None = None
-    toks = _split(first, delim)
-    if not all(_is_number(t) for t in toks):
-        names = tuple(t.strip().strip('"') for t in toks)
-        lines = lines[1:]
-    rows = []
-    width = len(names) if names else None
-    for lineno, ln in lines:
-        toks = _split(ln, delim)
-        if width is None:
-            width = len(toks)
-        if len(toks) != width:
-            raise CalibrationError(
-                f"{p}, line {lineno}: {len(toks)} values, expected {width}; fix or remove it"
-            )
-        try:
-            rows.append([float(t) for t in toks])
-        except ValueError:
-            raise CalibrationError(
-                f"{p}, line {lineno}: not all numbers ({ln[:60]!r})"
-            ) from None
-    if not rows:
-        raise CalibrationError(f"{p} has a header but no data rows")
-    data = np.array(rows, dtype=np.float64)
-    return Table(names=names, data=data, path=p, sha256=hashlib.sha256(raw).hexdigest())
-
-
-def pick_columns(table: Table, spec: str | None, sensor: str) -> list[int]:
-    """Indices of the three columns named by ``spec`` (names or zero-based indices)."""
-    ncol = table.data.shape[1]
-    if spec is None:
-        if table.names is not None:
-            want = SENSOR_COLUMNS[sensor]
-            if all(w in table.names for w in want):
-                return [table.names.index(w) for w in want]
-            numeric = [i for i, n in enumerate(table.names) if n != "t"]
-            if len(numeric) == 3:
-                return numeric
-            raise CalibrationError(
-                f"{table.path} has columns {', '.join(table.names)} but not "
-                f"{', '.join(want)}: pass --columns (names or zero-based indices, e.g. 0,1,2)"
-            )
-        if ncol == 3:
-            return [0, 1, 2]
-        raise CalibrationError(
-            f"{table.path} has {ncol} unnamed columns: pass --columns with three zero-based "
-            "indices, e.g. --columns 0,1,2"
-        )
-    parts = [s.strip() for s in spec.split(",") if s.strip()]
-    if len(parts) != 3:
-        raise CalibrationError(f"--columns needs three columns (x,y,z), got {spec!r}")
-    out = []
-    for s in parts:
-        if s.lstrip("-").isdigit():
-            i = int(s)
-            if not 0 <= i < ncol:
-                raise CalibrationError(
-                    f"--columns: index {i} is out of range; {table.path} has {ncol} columns "
-                    f"(0..{ncol - 1})"
-                )
-            out.append(i)
-        elif table.names is not None and s in table.names:
-            out.append(table.names.index(s))
-        else:
-            have = ", ".join(table.names) if table.names else "none (headerless: use indices)"
-            raise CalibrationError(f"--columns: no column {s!r}; names are: {have}")
-    return out
-
-
-# --------------------------------------------------------------------------------------------
 # The fit pipeline, shared with `triaxcal report`
+
+
+def _asa(text: str) -> tuple[int, int, int]:
+    parts = [s.strip() for s in text.split(",")]
+    try:
+        vals = tuple(int(s, 0) for s in parts)
+        asa_factors(vals)
+    except (ValueError, CalibrationError):
+        raise argparse.ArgumentTypeError(
+            f"--asa {text!r}: give the three fuse-ROM bytes, e.g. 176,177,165 (0..255, "
+            "decimal or 0x..)"
+        ) from None
+    return vals  # type: ignore[return-value]
 
 
 def add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -213,7 +146,9 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                         "iron), auto: chosen by BIC (default)")
     p.add_argument("--radius", default=None,
                    help="magnitude of calibrated readings with unit: 1g (accel default), "
-                        "9.80665, 48uT, 16384 (counts). Default for gyro/mag: the data's own")
+                        "9.80665 (m/s^2), 48uT, 16384 (counts); a value no sensor on Earth "
+                        "reads (e.g. 48mT for a magnetometer) gives a warning. Default for "
+                        "gyro/mag: the data's own")
     p.add_argument("--unit", default=None,
                    help="calibrated unit to record (default: from --radius)")
     p.add_argument("--raw-unit", default=None,
@@ -222,20 +157,30 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="reject readings whose length is more than SIGMA standard deviations "
                         "from the mean (Magneto's rule), iterated; 0 disables (default 2)")
     p.add_argument("--rounds", type=int, default=10,
-                   help="most reject-and-refit rounds (1 = a single pass like Magneto)")
+                   help="most reject-and-refit rounds; 1 = a single pass like Magneto "
+                        "(default 10)")
     p.add_argument("--reject-on", choices=("calibrated", "raw"), default="calibrated",
                    help="judge the first round on calibrated lengths (default) or raw lengths "
                         "(exactly Magneto's rule)")
     p.add_argument("--poses", action="store_true",
                    help="reduce a raw time series (a capture session) to still-pose means first")
-    p.add_argument("--window", type=int, default=25, help="pose detection window (samples)")
-    p.add_argument("--units-per-g", type=float, default=16384.0,
-                   help="accelerometer counts per g, for --poses (16384 at +-2 g)")
+    p.add_argument("--asa", type=_asa, default=None, metavar="X,Y,Z",
+                   help="magnetometer: the fuse-ROM sensitivity bytes ASAX,ASAY,ASAZ of an "
+                        "AK8963 (AK8975, AK09911, AK09912), applied before fitting as "
+                        "k = (ASA - 128) / 256 + 1; the part still takes the register counts")
+    p.add_argument("--bootstrap", type=int, default=0, metavar="N",
+                   help="also compute 95 %% bootstrap intervals of every coefficient from N "
+                        "refits (e.g. 1000, fixed seed), stored in the calibration, shown by "
+                        "report and used by diff")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a parameter at a value instead of fitting it (repeatable): "
                         "offset_x/y/z in raw units, gain_x/y/z (or gain for the sphere model) "
                         "in calibrated units per raw unit -- with --radius 16384 a gain of 1 "
                         "means unchanged counts, as in the seed's spreadsheet (--fix gain_z=1)")
+    add_pose_options(p)
+    p.add_argument("--skip-bad-lines", action="store_true",
+                   help="skip lines of the data file that are not a row of numbers (and count "
+                        "them) instead of stopping at the first one")
     add_source_options(p)
 
 
@@ -269,33 +214,45 @@ class FitOutcome:
     reason: str | None
     table: Table | None
     source: Source | None = None
+    #: Things to tell the user about the input (skipped lines, an implausible radius).
+    notes: list[str] = field(default_factory=list)
+    expected: ExpectedField | None = None
 
 
-def _pose_points(table: Table, cols: list[int], args: argparse.Namespace) -> np.ndarray:
-    from ..detect import detect_poses
-
-    names = table.names or ()
-    acc = [names.index(c) for c in SENSOR_COLUMNS["accel"]] if all(
-        c in names for c in SENSOR_COLUMNS["accel"]) else cols
-    det = detect_poses(table.data, window=args.window, units_per_g=args.units_per_g, columns=acc)
-    if len(det.poses) == 0:
-        raise CalibrationError(
-            f"no still poses found in {table.path} (window {args.window} samples): hold the "
-            "board still for a second in each pose, or drop --poses for point-per-row data"
-        )
-    return np.array([np.asarray(p.mean)[cols] for p in det.poses], dtype=np.float64)
-
-
-def fit_file(args: argparse.Namespace) -> FitOutcome:
-    """Read ``args.data``, pick columns, optionally reduce to poses, fit robustly."""
+def fit_file(args: argparse.Namespace, *, table: Table | None = None) -> FitOutcome:
+    """Read ``args.data`` (or take ``table``, already read), pick columns, optionally reduce
+    to poses, fit robustly."""
     from ..select import fit_robust
 
     sensor = args.sensor or "accel"
-    src = load_source(args.data, sensor, args)
+    notes: list[str] = []
+    expected = expected_from_args(args, sensor)
+    if (getattr(args, "yaw_only", False) or getattr(args, "align", False)) and sensor != "mag":
+        raise CalibrationError("--yaw-only and --align apply to --sensor mag")
+    src = load_source(args.data, sensor, args) if table is None else table_source(
+        table, sensor, args)
     table, pts = src.table, src.points
+    if table is not None:
+        notes += [f"note: {n}" for n in table.notes]
     raw_unit = args.raw_unit or src.raw_unit or "counts"
-    if args.radius is not None:
+    if getattr(args, "yaw_only", False):
+        if args.radius is not None and args.radius.strip().lower() != "wmm":
+            raise CalibrationError("--yaw-only takes the field from --location (the World "
+                                   "Magnetic Model); drop --radius")
+        part = yaw_part(args, src, expected, raw_unit)
+        if expected is not None:
+            part, _ = field_stats(part, expected)
+        return FitOutcome(part=part, points=pts, sensor=sensor,
+                          rejected=np.zeros(0, dtype=np.int64), reason=None, table=table,
+                          source=src, expected=expected)
+    if expected is not None and args.radius is not None and args.radius.strip().lower() == "wmm":
+        unit = args.unit or "uT"
+        radius = expected.total_ut * unit_factor("uT", unit)
+    elif args.radius is not None:
         radius, unit = parse_radius(args.radius, sensor)
+        warn = implausible_radius(sensor, radius, unit)
+        if warn:
+            notes.append(f"warning: {warn}")
     elif DEFAULT_RADIUS[sensor] is not None:
         radius, unit = DEFAULT_RADIUS[sensor]  # type: ignore[misc]
     else:
@@ -304,7 +261,13 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         unit = args.unit
     if args.rounds < 0:
         raise CalibrationError("--rounds must be >= 0")
-    rob = fit_robust(pts, model=args.model, radius=radius, sigma=args.sigma,
+    fitted = pts
+    if getattr(args, "asa", None) is not None:
+        if sensor != "mag":
+            raise CalibrationError("--asa is the magnetometer's sensitivity adjustment: use it "
+                                   "with --sensor mag")
+        fitted = apply_asa(pts, args.asa)  # adjusted before fitting, folded back below
+    rob = fit_robust(fitted, model=args.model, radius=radius, sigma=args.sigma,
                      max_rounds=args.rounds, lengths=args.reject_on,
                      fixed=parse_fix(getattr(args, "fix", None)))
     extra: dict[str, Any] = {
@@ -314,31 +277,86 @@ def fit_file(args: argparse.Namespace) -> FitOutcome:
         "sigma": float(args.sigma),
         "rejection_rounds": int(rob.rounds),
     }
-    if args.poses:
-        extra["pose_window"] = int(args.window)
-        extra["units_per_g"] = float(args.units_per_g)
+    if table is not None and table.skipped:
+        extra["lines_skipped"] = int(table.skipped)
     if rob.model_reason:
         extra["model_reason"] = rob.model_reason
     extra.update(src.extra)
     extra.update(autopilot_stats(src, sensor))
-    from ..report import coverage
-
     part = SensorCalibration.from_fit(
-        rob.fit, raw_unit=raw_unit, unit=unit, points=pts[rob.inliers],
+        rob.fit, raw_unit=raw_unit, unit=unit, points=fitted[rob.inliers],
         rejected=rob.rejected, input_sha256=src.sha256, source=str(src.path),
         extra_stats=extra,
     )
+    if fitted is not pts:  # the part takes the register counts the chip reports
+        part = fold_asa(part, args.asa)
     stats = dict(part.stats)
-    stats["coverage_pct"] = coverage(part.apply(pts[rob.inliers]))[1]
+    cov = coverage(part.apply(pts))  # of the session: every reading, outliers too
+    stats["coverage_pct"] = cov.percent
+    low = coverage_warning(cov, sensor)
+    stats["warnings"] = [*stats.get("warnings", []), *([low] if low else []),
+                         *(n[len("warning: "):] for n in notes if n.startswith("warning: "))]
+    if getattr(args, "bootstrap", 0):
+        from ..methods.bootstrap import bootstrap
+
+        if fitted is not pts:
+            raise CalibrationError("--bootstrap with --asa is not supported: the intervals "
+                                   "would describe the ASA-adjusted coefficients")
+        ci = bootstrap(fitted[rob.inliers], fit=rob.fit, radius=radius, n_boot=args.bootstrap,
+                       raw_unit=raw_unit, unit=unit)
+        stats["intervals"] = ci.as_dict()
+        stats["warnings"] = list(stats.get("warnings", [])) + ci.warnings()
     part = SensorCalibration(**{**_fields(part), "stats": stats})
+    if expected is not None:
+        part, _ = field_stats(part, expected)
     return FitOutcome(part=part, points=pts, sensor=sensor, rejected=rob.rejected,
-                      reason=rob.model_reason, table=table, source=src)
+                      reason=rob.model_reason, table=table, source=src, notes=notes,
+                      expected=expected)
+
+
+def fit_table(table: Table, args: argparse.Namespace) -> FitOutcome:
+    """:func:`fit_file` on a table already read (``triaxcal batch`` fits each board so)."""
+    return fit_file(args, table=table)
 
 
 def _fields(part: SensorCalibration) -> dict[str, Any]:
     return {k: getattr(part, k) for k in ("offset", "matrix", "raw_unit", "unit", "radius",
                                           "model", "temperature", "stats", "input_sha256",
-                                          "source")}
+                                          "source", "previous", "expected_field", "alignment")}
+
+
+def undetermined(part: SensorCalibration, points: Any) -> list[str]:
+    """Why a fit must not be written as a calibration: it did not converge, or its readings
+    cover too little of the sphere (a small cap or a thin band) to determine its model.
+
+    Returns the reasons in words (empty when the fit is usable).
+    """
+    why = []
+    s = part.stats
+    if s.get("converged") is False:
+        why.append(f"the fit did not converge ({s.get('iterations', '?')} iterations)")
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    d = part.apply(pts)
+    n = np.linalg.norm(d, axis=1)
+    d = d[n > 0] / n[n > 0, None]
+    if len(d):
+        mean = d.mean(axis=0)
+        m = float(np.linalg.norm(mean))
+        spread = float(np.linalg.eigvalsh(d.T @ d / len(d))[0])
+        if m > MAX_MEAN_DIRECTION:
+            cap = float(np.degrees(np.arccos(np.clip(d @ (mean / m), -1, 1))).max())
+            why.append(
+                f"the readings all point within {cap:.0f} deg of one direction "
+                f"(coverage {s.get('coverage_pct', 0):.0f} % of the sphere), too little to "
+                f"determine the {part.model} model"
+            )
+        elif spread < MIN_DIRECTION_SPREAD:
+            why.append(
+                f"the readings lie in a thin band round one axis (spread {spread:.3f}; 0.33 "
+                f"for readings all round the sphere), too little to determine the "
+                f"{part.model} model"
+            )
+    return why
 
 
 def register(subparsers: Any) -> None:
@@ -354,22 +372,60 @@ def register(subparsers: Any) -> None:
     p.add_argument("-o", "--output", required=True, metavar="CAL.json",
                    help="calibration file to write; an existing one keeps its other sensors")
     p.add_argument("--new", action="store_true",
-                   help="overwrite CAL.json instead of adding this sensor to it")
+                   help="overwrite CAL.json instead of adding this sensor to it (the replaced "
+                        "calibration of this sensor is still kept in its 'previous' summary)")
     p.add_argument("--sensor-id", default=None, help="board / sensor id to record")
+    p.add_argument("--force", action="store_true",
+                   help="write the calibration even when the fit did not converge or its "
+                        "readings cover too little of the sphere (the warning is kept in the "
+                        "file)")
+    add_field_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    path = check_output(args.output, "calibration file")
     out = fit_file(args)
-    path = Path(args.output)
+    for n in out.notes:
+        if n.startswith("note: "):  # warnings are printed with the fit's below
+            print(f"  {n}", file=sys.stderr)
+    # a yaw-only part is meant to cover a band round the vertical; it states its own limits
+    why = [] if out.part.model == "yaw" else undetermined(out.part, out.points[_inliers(out)])
+    if why and not args.force:
+        print(
+            f"triaxcal fit: not written: this {out.sensor} fit is not a calibration: "
+            + "; ".join(why) + f". Record instead: {RECORD_INSTEAD[out.sensor]}. (--force "
+            "writes it anyway, with this warning kept in the file.)",
+            file=sys.stderr,
+        )
+        return 2
+    if why:
+        stats = dict(out.part.stats)
+        stats["warnings"] = [*stats.get("warnings", []),
+                             *(f"written with --force although {w}" for w in why)]
+        stats["forced"] = True
+        out.part = SensorCalibration(**{**_fields(out.part), "stats": stats})
+    align_text = None
+    if getattr(args, "align", False):
+        al, align_text = alignment_for(args, out.source, out.part, out.expected)
+        out.part = out.part.replace(alignment=al)
     cal = None
-    if path.exists() and not args.new:
+    if path.is_file() and path.stat().st_size > 0 and not args.new:
         try:
             cal = Calibration.load(path)
         except CalibrationError as exc:
             raise CalibrationError(
                 f"{path} exists but is not a calibration file ({exc}); pass --new to replace it"
             ) from None
+    # the calibration this one replaces is not lost: its summary goes into `previous`
+    old = cal
+    if old is None and path.exists():
+        try:
+            old = Calibration.load(path)
+        except CalibrationError:
+            old = None  # --new over a file that is not a calibration: nothing to keep
+    if old is not None and getattr(old, out.sensor) is not None:
+        out.part = out.part.with_previous(old.part(out.sensor), created_utc=old.created_utc)
     if cal is None:
         parts: dict[str, Any] = {out.sensor: out.part}
         cal = Calibration(**parts, sensor_id=args.sensor_id or "")
@@ -382,17 +438,27 @@ def run(args: argparse.Namespace) -> int:
         verb = "updated"
     cal.save(path)
     s = out.part.stats
-    norms = s.get("norms", {})
+    som = s.get("norms", {}).get("std_over_mean")
     print(
         f"{verb} {path}: {out.sensor} ({out.part.raw_unit} -> {out.part.unit}), model "
         f"{out.part.model}, {s['n']} readings used, {len(out.rejected)} rejected; residual RMS "
         f"{s['rms']:.4g} {out.part.unit} ({s['rms_pct_of_radius']:.3g} % of radius); "
-        f"std/mean of |v| {100 * norms.get('std_over_mean', float('nan')):.3g} %; coverage "
+        f"std/mean of |v| {'n/a' if som is None else f'{100 * som:.3g} %'}; coverage "
         f"{s['coverage_pct']:.0f} %",
         file=sys.stdout,
     )
     if out.reason:
         print(f"  model: {out.reason}")
+    if out.expected is not None:
+        print(f"  expected field: {out.expected.text()}")
+        if s.get("field_strength_ut") is not None:
+            print(f"  the readings show {s['field_strength_ut']:.4g} uT")
+    if "yaw" in s:
+        from ..methods.yaw import yaw_text
+
+        print("  " + yaw_text(s["yaw"], out.part.unit).replace("\n", "\n  "))
+    if align_text:
+        print("  " + align_text.replace("\n", "\n  "))
     for w in s.get("warnings", []):
         print(f"  warning: {w}")
     if out.source is not None and out.source.recording is not None:
@@ -402,3 +468,9 @@ def run(args: argparse.Namespace) -> int:
         for w in out.source.recording.meta.get("warnings", []):
             print(f"  warning: {w}")
     return 0
+
+
+def _inliers(out: FitOutcome) -> np.ndarray:
+    keep = np.ones(len(out.points), dtype=bool)
+    keep[np.asarray(out.rejected, dtype=np.int64)] = False
+    return keep

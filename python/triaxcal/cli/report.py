@@ -3,7 +3,9 @@
 With a session / data file: fit it as ``triaxcal fit`` would (same options) and report. With a
 calibration file: report each part on its input data -- the file named in the calibration
 (as recorded, or next to CAL.json, and checked against the stored SHA-256) or
-the one given with ``--data``; without data, the statistics stored at fit time.
+the one given with ``--data``; without data, the statistics stored at fit time. A part that
+is not a fit of readings to a sphere (e.g. a gyroscope bias) is always reported from its
+stored statistics.
 """
 
 from __future__ import annotations
@@ -16,10 +18,17 @@ from typing import Any
 
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
+from ..fit import MODELS
+from ..io.files import check_output, write_file
 from ..io.logs import is_log
-from ..report import QualityReport, plot_report, quality_report
+from ..io.tables import pick_columns, read_table
+from ..poses import pose_points
+from ..report import QualityReport, context_lines, plot_report, quality_report
+from ._calfile import file_sha256
+from ._method_parts import summary_only, summary_text, tilt_points
+from ._poses import apply_settings, stored_settings
 from ._source import load_source
-from .fit import add_fit_options, fit_file, pick_columns, read_table
+from .fit import add_fit_options, fit_file
 
 
 def register(subparsers: Any) -> None:
@@ -29,7 +38,9 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("data", metavar="SESSION.csv|CAL.json")
+    p.add_argument("data", metavar="SESSION.csv|LOG|CAL.json",
+                   help="a session CSV, table of numbers or log to fit and report, or a "
+                        "calibration file to judge on its data")
     p.add_argument("--plot", metavar="FIG.png", default=None,
                    help="save the figure (needs matplotlib: pip install 'triaxcal[plot]'); with "
                         "several sensors, the sensor name is added before .png")
@@ -45,7 +56,8 @@ def _is_calibration(path: Path) -> bool:
     if path.suffix.lower() == ".json":
         return True
     try:
-        head = path.read_bytes()[:200].lstrip()
+        with open(path, "rb") as f:
+            head = f.read(200).lstrip()
     except OSError:
         return False
     return head.startswith(b"{")
@@ -76,6 +88,7 @@ def _stored_text(sensor: str, part: SensorCalibration) -> str:
         lines.append(f"  coverage        {s['coverage_pct']:.0f} % of the sphere")
     if s.get("rejected") is not None:
         lines.append(f"  outliers        {len(s['rejected'])} rejected")
+    lines += context_lines(part)
     for w in s.get("warnings", []):
         lines.append(f"    - {w}")
     return "\n".join(lines)
@@ -93,7 +106,8 @@ def _log_report(src: Path, part: SensorCalibration, sensor: str,
         same.topic = list(log["topic"])
     same.undo_autopilot_cal = args.undo_autopilot_cal or bool(log.get("undo_autopilot_cal"))
     same.poses = bool(part.stats.get("poses")) or args.poses
-    same.window = int(part.stats.get("pose_window", args.window))
+    if part.stats.get("poses"):  # the poses it was fitted on, found with its stored settings
+        apply_settings(same, stored_settings(part.stats))
     data = load_source(src, sensor, same)
     if args.data_file is None and part.input_sha256 not in (None, data.sha256):
         raise CalibrationError(
@@ -115,18 +129,40 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.data)
     if not path.exists():
         raise CalibrationError(f"{path} not found")
+    if path.is_dir() and not is_log(path):
+        raise CalibrationError(
+            f"{path} is a folder: give the calibration file or the session CSV inside it"
+        )
+    if args.plot:
+        check_output(args.plot, "figure")
+    if args.json_out:
+        check_output(args.json_out, "report")
+    skip = getattr(args, "skip_bad_lines", False)
     reports: dict[str, QualityReport] = {}
     if _is_calibration(path):
+        if getattr(args, "bootstrap", 0):
+            raise CalibrationError(
+                "--bootstrap applies when a session is fitted: triaxcal fit SESSION --bootstrap N "
+                "stores the intervals in the calibration, and report shows them"
+            )
         cal = Calibration.load(path)
         sensors = [args.sensor] if args.sensor else list(cal.sensors)
         for sensor in sensors:
             part = cal.part(sensor)
             src = Path(args.data_file) if args.data_file else _find_source(path, part)
+            if src is not None and part.model not in MODELS:
+                print(_stored_text(sensor, part).replace(
+                    "(pass --data FILE for the full report and figure)",
+                    f"(model {part.model!r} is not a fit to a sphere: no figure)"))
+                continue
             if src is None:
                 print(_stored_text(sensor, part))
                 if args.plot:
                     print(f"  (no figure for {sensor}: its data file {part.source!r} was not "
                           "found; pass --data FILE)", file=sys.stderr)
+                continue
+            if summary_only(part):  # gyro gains, temperature terms, a bias: not a sphere
+                print(summary_text(sensor, part))
                 continue
             if is_log(src):
                 rep, log_pts = _log_report(src, part, sensor, args)
@@ -137,23 +173,26 @@ def run(args: argparse.Namespace) -> int:
                                       _plot_path(args.plot, sensor, len(sensors) > 1), report=rep)
                     print(f"  figure: {out}")
                 continue
-            table = read_table(src)
-            if args.data_file is None and part.input_sha256 not in (None, table.sha256):
+            if part.stats.get("method") == "tilt-rig":
+                pts, sha = tilt_points(src, part), file_sha256(src)
+            else:
+                table = read_table(src, skip_bad_lines=skip)
+                for n in table.notes:
+                    print(f"  note: {n}", file=sys.stderr)
+                sha = table.sha256
+                cols_spec = args.columns or ",".join(
+                    str(c) for c in part.stats.get("columns", []))
+                cols = pick_columns(table, cols_spec or None, sensor)
+                pts = table.data[:, cols]
+                if part.stats.get("poses"):
+                    # the poses the part was fitted on, found again with its stored settings
+                    pts, _ = pose_points(table, cols, stored_settings(part.stats))
+            if args.data_file is None and part.input_sha256 not in (None, sha):
                 raise CalibrationError(
                     f"{src} has changed since the calibration was made (SHA-256 differs): pass "
                     "--data FILE explicitly to judge the calibration on it anyway"
                 )
-            cols_spec = args.columns or ",".join(str(c) for c in part.stats.get("columns", []))
-            cols = pick_columns(table, cols_spec or None, sensor)
-            pts = table.data[:, cols]
-            if part.stats.get("poses"):
-                from .fit import _pose_points
-
-                same = argparse.Namespace(**vars(args))
-                same.window = int(part.stats.get("pose_window", args.window))
-                same.units_per_g = float(part.stats.get("units_per_g", args.units_per_g))
-                pts = _pose_points(table, cols, same)
-            rej = part.stats.get("rejected") if table.sha256 == part.input_sha256 else None
+            rej = part.stats.get("rejected") if sha == part.input_sha256 else None
             if rej is not None and (not rej or max(rej) < len(pts)):
                 rep = quality_report(pts, part, sensor=sensor, rejected=rej)
             else:
@@ -166,6 +205,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  figure: {out}")
     else:
         res = fit_file(args)
+        for n in res.notes:
+            print(f"  {n}", file=sys.stderr)
         rep = quality_report(res.points, res.part, sensor=res.sensor,
                              rejected=res.rejected.tolist(), model_reason=res.reason)
         reports[res.sensor] = rep
@@ -174,9 +215,8 @@ def run(args: argparse.Namespace) -> int:
             out = plot_report(res.points, res.part, args.plot, report=rep)
             print(f"  figure: {out}")
     if args.json_out:
-        Path(args.json_out).write_text(
-            json.dumps({k: r.to_dict() for k, r in reports.items()}, indent=2) + "\n",
-            encoding="utf-8",
-        )
+        write_file(args.json_out,
+                   json.dumps({k: r.to_dict() for k, r in reports.items()}, indent=2) + "\n",
+                   what="report")
         print(f"  numbers: {args.json_out}")
     return 0

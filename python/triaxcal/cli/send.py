@@ -14,7 +14,7 @@ from typing import Any
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
-from ..export import echo_matches, motioncal_packet, parse_motioncal_echo
+from ..export import echo_matches, motioncal_losses, motioncal_packet, parse_motioncal_echo
 from .export import _scale
 
 
@@ -74,21 +74,31 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("calibration", metavar="CAL.json")
+    p.add_argument("calibration", metavar="CAL.json",
+                   help="calibration file written by triaxcal fit (or Calibration.save)")
     p.add_argument("--port", required=True,
                    help="serial port (/dev/ttyUSB0, COM3) or a pyserial URL (loop://)")
-    p.add_argument("--baud", type=int, default=115200)
-    p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the echo")
+    p.add_argument("--baud", type=int, default=115200,
+                   help="baud rate of the board's serial port (default 115200)")
+    p.add_argument("--timeout", type=float, default=3.0,
+                   help="seconds to wait for the echo (default 3)")
     p.add_argument("--counts-per-unit", type=_scale, action="append", default=[],
                    metavar="SENSOR=COUNTS[:UNIT]",
                    help="the board driver's scale (default accel=16384:g, gyro=131:deg/s, "
                         "mag=10:uT)")
+    p.add_argument("--offsets-only", action="store_true",
+                   help="accept that the packet carries the accelerometer's and gyroscope's "
+                        "offsets but not their gains or any temperature terms (without it such "
+                        "a calibration is refused, naming what would be lost)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     cal = Calibration.load(args.calibration)
-    packet = motioncal_packet(cal, counts_per_unit=dict(args.counts_per_unit) or None)
+    cpu = dict(args.counts_per_unit) or None
+    packet = motioncal_packet(cal, counts_per_unit=cpu, offsets_only=args.offsets_only)
+    for lost in motioncal_losses(cal, counts_per_unit=cpu):
+        print(f"  not in the packet: {lost}")
     cal1, cal2 = send_packet(args.port, packet, baud=args.baud, timeout=args.timeout)
     print(f"sent {len(packet)}-byte MotionCal packet to {args.port}; the board confirmed it")
     print("  Cal1: " + ", ".join(f"{v:.4f}" for v in cal1))

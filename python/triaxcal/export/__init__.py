@@ -9,6 +9,8 @@ One module per target format:
   (Q7.24 matrix, int64 accumulation), and :func:`apply_fixed`, its bit-exact Python model.
 * :mod:`~triaxcal.export.motioncal` -- :func:`motioncal_packet`, the 68-byte PJRC MotionCal
   packet that Adafruit_Sensor_Calibration sketches accept.
+* :mod:`~triaxcal.export.js` -- :func:`js_module`, a JavaScript module with the coefficients and
+  ``apply``: an ES module (``js``) or plain ECMAScript 5.1 for Espruino (``js-espruino``).
 * :mod:`~triaxcal.export.ardupilot` -- :func:`ardupilot_parm`, ArduPilot ``COMPASS_*``,
   ``INS_ACC*``, ``INS_GYR*``, ``INS_TCALn_*`` parameters (``.parm``).
 * :mod:`~triaxcal.export.px4` -- :func:`px4_params_file`, PX4 ``CAL_*`` and ``TC_*``
@@ -31,6 +33,7 @@ from typing import Any
 
 from ..calibration import SENSORS, Calibration
 from ..errors import CalibrationError
+from ..io.files import os_error_message, write_file
 from ..io.motioncal import (
     MotionCalPacket,
     decode_motioncal,
@@ -45,8 +48,9 @@ from .adafruit import adafruit_calib, adafruit_calib_json
 from .ardupilot import ardupilot_params, ardupilot_parm
 from .c import c_header
 from .c_fixed import FixedPoint, apply_fixed, c_fixed_header, fixed_point
+from .js import js_module
 from .kalibr import KALIBR_MODELS, KALIBR_NOISE_KEYS, kalibr_imu_yaml, kalibr_intrinsics
-from .motioncal import motioncal_packet
+from .motioncal import motioncal_losses, motioncal_packet
 from .px4 import px4_params, px4_params_file
 
 __all__ = [
@@ -73,13 +77,16 @@ __all__ = [
     "encode_motioncal",
     "export",
     "fixed_point",
+    "js_module",
+    "motioncal_losses",
     "motioncal_packet",
     "parse_motioncal_echo",
     "unit_factor",
     "write_outputs",
 ]
 
-EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal", "ardupilot", "px4", "kalibr", "adafruit")
+EXPORT_FORMATS = ("c", "c-fixed", "json", "motioncal", "ardupilot", "px4", "kalibr", "adafruit",
+                  "js", "js-espruino")
 
 
 def export(
@@ -89,6 +96,7 @@ def export(
     *,
     prefix: str = "triaxcal",
     counts_per_unit: Mapping[str, Any] | None = None,
+    offsets_only: bool = False,
     **options: Any,
 ) -> Path:
     """Write ``cal`` in format ``fmt`` (one of :data:`EXPORT_FORMATS`) to ``path``.
@@ -97,27 +105,35 @@ def export(
     ``sensors``, ``compass_scale``, ``offsets_max``), :func:`px4_params_file` (``instance``,
     ``sensors``, ``device_ids``, ``system_id``, ``component_id``), :func:`kalibr_imu_yaml`
     (``topic``, ``rate_hz``, ``noise``, ``model``), :func:`adafruit_calib_json` (``sensors``).
+    ``offsets_only`` is :func:`motioncal_packet`'s (accept the terms the packet cannot hold).
+
+    The file is written whole and atomically (:func:`triaxcal.io.files.write_file`); a
+    failure (missing folder, full disk) raises :class:`CalibrationError` saying what to do.
     """
     if options and fmt not in _PARAM_WRITERS:
         raise CalibrationError(
             f"options {sorted(options)} apply to the parameter formats "
             f"({', '.join(_PARAM_WRITERS)}), not to {fmt!r}"
         )
-    p = Path(path)
+    if offsets_only and fmt != "motioncal":
+        raise CalibrationError(f"offsets_only applies to the motioncal format, not to {fmt!r}")
+    data: str | bytes
     if fmt == "c":
-        p.write_text(c_header(cal, prefix=prefix), encoding="utf-8")
+        data = c_header(cal, prefix=prefix)
     elif fmt == "c-fixed":
-        p.write_text(c_fixed_header(cal, prefix=prefix), encoding="utf-8")
+        data = c_fixed_header(cal, prefix=prefix)
     elif fmt == "json":
-        p.write_text(cal.to_json(), encoding="utf-8")
+        data = cal.to_json()
     elif fmt == "motioncal":
-        p.write_bytes(motioncal_packet(cal, counts_per_unit=counts_per_unit))
+        data = motioncal_packet(cal, counts_per_unit=counts_per_unit, offsets_only=offsets_only)
+    elif fmt in ("js", "js-espruino"):
+        form = "esm" if fmt == "js" else "espruino"
+        data = js_module(cal, prefix=prefix, form=form)
     elif fmt in _PARAM_WRITERS:
-        text = _PARAM_WRITERS[fmt](cal, counts_per_unit=counts_per_unit, **options)
-        p.write_text(text, encoding="utf-8")
+        data = _PARAM_WRITERS[fmt](cal, counts_per_unit=counts_per_unit, **options)
     else:
         raise CalibrationError(f"unknown export format {fmt!r}: use one of {EXPORT_FORMATS}")
-    return p
+    return write_file(path, data, what=f"{fmt} export")
 
 
 _PARAM_WRITERS: dict[str, Any] = {
@@ -140,14 +156,18 @@ def write_outputs(
 
     Files: ``calibration.json``, ``<prefix>_calibration.h`` (float),
     ``<prefix>_calibration_fixed.h`` (only when every part has raw counts), ``motioncal.bin``
-    (when there is a magnetometer or accelerometer part with a symmetric matrix), and per
+    (when the magnetometer's matrix is symmetric and unrotated; it carries the accelerometer's
+    and gyroscope's offsets only, see :func:`motioncal_losses`), and per
     sensor in ``points_by_sensor`` (raw (N, 3) readings) ``report_<sensor>.txt`` and, when
     ``plot`` and matplotlib is installed, ``report_<sensor>.png``.
     """
     from .. import report as _report
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CalibrationError(os_error_message(exc, out, "create")) from None
     paths: dict[str, Path] = {}
     paths["json"] = cal.save(out / "calibration.json")
     p = _ident(prefix)
@@ -155,7 +175,7 @@ def write_outputs(
     if all(cal.part(s).raw_unit == "counts" for s in cal.sensors):
         paths["c-fixed"] = export(cal, "c-fixed", out / f"{p}_calibration_fixed.h", prefix=p)
     try:
-        paths["motioncal"] = export(cal, "motioncal", out / "motioncal.bin")
+        paths["motioncal"] = export(cal, "motioncal", out / "motioncal.bin", offsets_only=True)
     except CalibrationError:
         pass  # e.g. a non-symmetric magnetometer matrix: the headers still carry it
     for sensor, pts in (points_by_sensor or {}).items():
@@ -163,7 +183,7 @@ def write_outputs(
             continue
         rep = _report.quality_report(pts, cal.part(sensor), sensor=sensor)
         txt = out / f"report_{sensor}.txt"
-        txt.write_text(rep.text() + "\n", encoding="utf-8")
+        write_file(txt, rep.text() + "\n", what="report")
         paths[f"report_{sensor}"] = txt
         if plot and _report.have_matplotlib():
             paths[f"figure_{sensor}"] = _report.plot_report(

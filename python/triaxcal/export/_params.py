@@ -20,7 +20,7 @@ import numpy as np
 
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
-from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
+from ..units import DEVICE_COUNTS_PER_UNIT, per_unit, unit_factor
 
 __all__ = ["Physical", "f32", "physical", "pick_sensors"]
 
@@ -128,7 +128,7 @@ def require_diagonal(p: Physical, fmt: str, what: str, *, rel: float = 1e-9) -> 
     if off > rel * np.abs(np.diag(m)).max():
         raise CalibrationError(
             f"{fmt} stores only per-axis {p.sensor} scales ({what}); this calibration has "
-            f"cross-axis terms up to {off:.3g} {p.unit} per {p.raw_unit} that it would drop: "
+            f"cross-axis terms up to {off:.3g} {per_unit(p.unit, p.raw_unit)} that it would drop: "
             "refit with --model axis (or sphere), or export another format"
         )
     return np.diag(m).copy()
@@ -140,7 +140,7 @@ def require_identity(p: Physical, fmt: str, *, rel: float = 1e-9) -> None:
     if dev > rel:
         raise CalibrationError(
             f"{fmt} applies no {p.sensor} gains (offsets only), but this calibration's gains "
-            f"in {p.unit} per {p.raw_unit} differ from 1 by up to {dev:.3g}; it would drop "
+            f"in {per_unit(p.unit, p.raw_unit)} differ from 1 by up to {dev:.3g}; it would drop "
             "them: export only the other sensors (--sensors), or use another format"
         )
 
@@ -200,3 +200,36 @@ def check_range(value: float, lo: float, hi: float, name: str, why: str) -> floa
     if not (lo <= value <= hi):
         raise CalibrationError(f"{name} = {value:.6g} is outside {lo:g}..{hi:g}: {why}")
     return value
+
+
+def mag_mounting(cal: Calibration, fmt: str, param: str) -> Any:
+    """The right-angle mounting of the magnetometer's alignment, for ``COMPASS_ORIENTn`` /
+    ``CAL_MAGn_ROT``: None without an alignment; refuses one no right-angle rotation is near;
+    warns (:class:`~triaxcal.methods.alignment.AlignmentWarning`) when more than 1 deg of it
+    is left out."""
+    import warnings
+
+    from ..methods.alignment import AlignmentWarning
+    from ..rotations import mounting, nearest_mounting
+
+    part = cal.mag
+    if part is None or part.alignment is None:
+        return None
+    al = part.alignment
+    if al.to != "accel":
+        raise CalibrationError(f"{fmt}'s {param} turns the compass into the vehicle's frame; "
+                               f"this alignment turns it into the {al.to}'s")
+    if al.mounting is None:
+        near, ang = nearest_mounting(al.rotation)
+        raise CalibrationError(
+            f"{fmt}'s {param} holds right-angle rotations only; this magnetometer's alignment "
+            f"is {ang:.1f} deg from the nearest ({near.name}): mount the sensor square, or "
+            "export without the alignment (--no-alignment; cal.mag.replace(alignment=None))")
+    m = mounting(al.mounting)
+    resid = float(al.mounting_residual_deg or 0.0)
+    if resid > 1.0:
+        warnings.warn(
+            f"{fmt}'s {param} holds the right-angle mounting {m.name}; the remaining "
+            f"{resid:.2f} deg of the magnetometer-to-accelerometer alignment are left out "
+            "(headings may be off by about as much)", AlignmentWarning, stacklevel=4)
+    return m

@@ -10,7 +10,10 @@ else. ``Adafruit_Sensor_Calibration::calibrate`` applies them to the driver's ev
     gyro  = raw - zerorate                    (rad/s)
     accel = raw - zerog                       (m/s^2)
 
-so accelerometer and gyroscope gains other than 1 cannot be held and are refused. Raw counts
+so accelerometer and gyroscope gains other than 1 cannot be held and are refused. A
+magnetometer alignment (``cal.mag.alignment``) is folded into the soft-iron matrix, which the
+library applies as a full 3x3: ``softiron = rotation @ matrix`` gives the field in the
+accelerometer's frame. Raw counts
 are converted with the driver's nominal scale (``counts_per_unit``, as for the MotionCal
 packet). Parts left out keep the library's defaults (zeros, identity).
 """
@@ -55,7 +58,14 @@ def adafruit_calib(
                                    f"{sensor} has them")
         if sensor == "mag":
             out["mag_hardiron"] = [float(v) for v in p.offset]
-            out["mag_softiron"] = [float(v) for v in np.asarray(p.matrix).ravel()]
+            soft = np.asarray(p.matrix)
+            if cal.mag is not None and cal.mag.alignment is not None:
+                if cal.mag.alignment.to != "accel":
+                    raise CalibrationError(f"{FMT} fuses the magnetometer with the accelerometer; "
+                                           "this alignment turns it into the "
+                                           f"{cal.mag.alignment.to}'s frame")
+                soft = cal.mag.alignment.rotation @ soft
+            out["mag_softiron"] = [float(v) for v in soft.ravel()]
             out["mag_field"] = float(p.radius) if p.radius is not None else 0.0
         else:
             require_identity(p, FMT)

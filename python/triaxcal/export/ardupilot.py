@@ -28,6 +28,14 @@ The equations ArduPilot applies (read from its source; the same are in
   polynomial about 35 deg C, so both agree exactly inside ``[TMIN, TMAX]`` (set to the fitted
   range); ArduPilot holds the correction constant outside it, triaxcal extrapolates.
 
+A magnetometer alignment (``cal.mag.alignment``, magnetometer frame to accelerometer frame)
+goes to ``COMPASS_ORIENTn``, which ArduPilot applies to external compasses *before* the
+correction (``AP_Compass_Backend::rotate_field``, ``Vector3::rotate``; internal compasses
+follow the board orientation instead): ``field = M_b ((R raw + OFS_b) * SCALE)`` with
+``M_b = R M R^T`` and ``OFS_b = -R offset``, which is the aligned calibration
+``R M (raw - offset)`` exactly. Only the right-angle part ``R`` is held: more than 1 deg left
+over warns (``AlignmentWarning``), no right-angle rotation within 20 deg is refused.
+
 What the format cannot hold is refused with the reason: cross-axis accelerometer terms, any
 gyroscope gain, a non-symmetric compass matrix, temperature-dependent gains, polynomials of
 degree above 3, and values outside ArduPilot's accepted ranges (``INS_ACCSCAL`` 0.8..1.2,
@@ -41,6 +49,7 @@ Planner, MAVProxy (``param load``) and ArduPilot's own defaults parser
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -52,6 +61,7 @@ from ._params import (
     Physical,
     check_range,
     f32,
+    mag_mounting,
     physical,
     pick_sensors,
     require_degree,
@@ -232,7 +242,13 @@ def ardupilot_params(
             out[f"{prefix}ENABLE"] = 0.0
     if "mag" in chosen:
         p = physical(cal.part("mag"), "mag", "mG", "mG", counts_per_unit, fmt=FMT)
+        mnt = mag_mounting(cal, FMT, f"COMPASS_ORIENT{_n(compass)}")
+        if mnt is not None:  # ArduPilot corrects after rotating: offsets and matrix turn too
+            r = mnt.matrix
+            p = replace(p, offset=r @ p.offset, matrix=r @ p.matrix @ r.T)
         out.update(_compass(p, compass, compass_scale, float(offsets_max)))
+        if mnt is not None:
+            out[f"COMPASS_ORIENT{_n(compass)}"] = float(mnt.number)
     return out
 
 
@@ -253,6 +269,7 @@ def ardupilot_parm(cal: Calibration, **kwargs: Any) -> str:
         f"# ArduPilot parameters written by triaxcal {__version__}",
         f"# sensor id: {_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
         "# compass: field = M @ ((raw + COMPASS_OFS) * COMPASS_SCALE)   [mG, body frame]",
+        "#          (COMPASS_ORIENT, when written, rotates raw first; external compasses only)",
         "# accel:   (raw - tcal(T) - INS_ACCOFFS) * INS_ACCSCAL          [m/s^2, sensor frame]",
         "# gyro:     raw - tcal(T) - INS_GYROFFS                          [rad/s, sensor frame]",
         "# Gyro offsets are measured again at every boot unless INS_GYR_CAL = 0.",

@@ -8,9 +8,12 @@ Model: ``out = matrix * (raw - offset)`` (the matrix **multiplies**), with the p
 from __future__ import annotations
 
 from ..calibration import Calibration, SensorCalibration
+from ..units import per_unit
 from ._cgen import (
     _AX,
     _OFFD,
+    _blocks,
+    _c_comment,
     _c_poly_array,
     _cf,
     _fmt,
@@ -36,7 +39,10 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
     temperature terms add ``_TEMP_REF_C``, ``<prefix>_<sensor>_offset_poly[K][3]`` (and
     ``_gain_poly``) and ``<prefix>_<sensor>_apply_t(raw, temp_c, out)``; ``_apply`` then
     applies the calibration at the reference temperature. The comment block gives units, the
-    fit quality and a test vector (also as ``_test_raw`` / ``_test_out`` arrays).
+    fit quality and a test vector (also as ``_test_raw`` / ``_test_out`` arrays). A part with an
+    alignment (magnetometer to accelerometer) adds a block ``<sensor>_aligned`` whose matrix is
+    ``rotation @ matrix``: ``<prefix>_mag_aligned_apply`` gives the field in the accelerometer's
+    frame.
 
     Parameters
     ----------
@@ -54,17 +60,17 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
     guard = _guard(p, "CALIBRATION")
     comment: list[str] = []
     code: list[str] = []
-    for sensor in cal.sensors:
-        part = cal.part(sensor)
+    for sensor, part, note in _blocks(cal):
         S = f"{P}_{sensor.upper()}"
         s = f"{p}_{sensor}"
         traw = _test_raw(part)
         tt = part.temperature.temp_ref_c if part.temperature is not None else None
         tout = part.apply(traw, temperature=tt)
+        comment += ["", note] if note else []
         comment += [
             "",
             f"{sensor}: raw {part.raw_unit} -> calibrated {part.unit}; offset in "
-            f"{part.raw_unit}, matrix in {part.unit} per {part.raw_unit}"
+            f"{part.raw_unit}, matrix in {per_unit(part.unit, part.raw_unit)}"
             + (f"; radius {_fmt(part.radius)} {part.unit}" if part.radius else ""),
             *_stats_lines(part),
             f"test vector: {s}_apply({_vec(traw)}) -> {_vec(tout)} {part.unit}",
@@ -77,7 +83,7 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
                 "offset + sum_k offset_poly[k] * dT^k"
                 + ("; raw gain 1 + sum_k gain_poly[k] * dT^k" if t.gain_poly is not None else "")
             )
-        code.append(f"/* ---- {sensor}: {part.raw_unit} -> {part.unit} ---- */")
+        code.append(_c_comment(f"---- {sensor}: {part.raw_unit} -> {part.unit} ----"))
         for i, a in enumerate(_AX):
             code.append(f"#define {S}_OFFSET_{a} {_cf(part.offset[i])}")
         for i, a in enumerate(_AX):
@@ -98,7 +104,8 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
             (f"TRIAXCAL_UNUSED static const float {s}_test_out[3] = "
             f"{{{', '.join(_cf(v) for v in tout)}}};"),
             "",
-            f"/* out = matrix * (raw - offset): raw in {part.raw_unit}, out in {part.unit}. */",
+            _c_comment(f"out = matrix * (raw - offset): raw in {part.raw_unit}, out in "
+                       f"{part.unit}."),
             f"static inline void {s}_apply(const float raw[3], float out[3])",
             "{",
             f"    const float d0 = raw[0] - {s}_offset[0];",

@@ -23,6 +23,8 @@ from ..errors import CalibrationError
 from ._cgen import (
     _AX,
     _OFFD,
+    _blocks,
+    _c_comment,
     _c_poly_array,
     _fmt,
     _guard,
@@ -194,14 +196,14 @@ def c_fixed_header(
         "up by an arithmetic right shift. out = calibrated value * OUT_SCALE (within 1 count).",
     ]
     code: list[str] = []
-    for sensor in cal.sensors:
-        part = cal.part(sensor)
+    for sensor, part, note in _blocks(cal):
         if part.raw_unit != "counts":
             raise CalibrationError(
                 f"the fixed-point header needs integer raw readings; the {sensor} part's raw "
                 f"unit is {part.raw_unit!r}. Fit raw counts, or use --format c"
             )
-        sc = out_scale.get(sensor) if isinstance(out_scale, Mapping) else out_scale
+        base = sensor.removesuffix("_aligned")
+        sc = out_scale.get(base) if isinstance(out_scale, Mapping) else out_scale
         fp = fixed_point(part, out_scale=sc)
         num, den = _fraction(fp.out_scale)
         S = f"{P}_{sensor.upper()}"
@@ -210,6 +212,7 @@ def c_fixed_header(
         texp = apply_fixed(fp, traw)[0]
         tt = part.temperature.temp_ref_c if part.temperature is not None else None
         exact = part.apply(traw.astype(float), temperature=tt) * fp.out_scale
+        comment += ["", note] if note else []
         comment += [
             "",
             (f"{sensor}: raw {part.raw_unit} (int16_t) -> out in 1/{_fmt(fp.out_scale)} "
@@ -218,10 +221,10 @@ def c_fixed_header(
             (f"test vector: {s}_apply_q({_vec(traw)}) -> {_vec(texp)} "
             f"(exact {_vec(exact)})"),
         ]
-        code.append(
-            f"/* ---- {sensor}: int16_t {part.raw_unit} -> int32_t in 1/{_fmt(fp.out_scale)} "
-            f"{part.unit} ---- */"
-        )
+        code.append(_c_comment(
+            f"---- {sensor}: int16_t {part.raw_unit} -> int32_t in 1/{_fmt(fp.out_scale)} "
+            f"{part.unit} ----"
+        ))
         code.append(f"#define {S}_Q_FRAC_BITS {FRAC_BITS}")
         code.append(f"#define {S}_Q_OUT_SCALE_NUM {num}L")
         code.append(f"#define {S}_Q_OUT_SCALE_DEN {den}L")
@@ -247,7 +250,8 @@ def c_fixed_header(
             (f"TRIAXCAL_UNUSED static const int32_t {s}_q_test_out[3] = "
             f"{{{', '.join(_cl(int(v)) for v in texp)}}};"),
             "",
-            f"/* out = round(OUT_SCALE * matrix * (raw - offset)), raw int16_t {part.raw_unit}. */",
+            _c_comment(f"out = round(OUT_SCALE * matrix * (raw - offset)), raw int16_t "
+                       f"{part.raw_unit}."),
             f"static inline void {s}_apply_q(const int16_t raw[3], int32_t out[3])",
             "{",
             f"    const int32_t d0 = (int32_t)raw[0] - {s}_q_offset[0];",

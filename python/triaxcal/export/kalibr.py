@@ -25,6 +25,9 @@ Intrinsics, as Kalibr's ``--imu-models`` name them and its results write them
   Q.T``. ``A`` (g-sensitivity) is zero: triaxcal does not model it. Kalibr estimates the
   biases ``b`` itself as random-walk states, so triaxcal's offsets go in the comment block.
 
+Kalibr's IMU model has no magnetometer: a magnetometer part (and its alignment with the
+accelerometer) is not written, and the file says so in a comment.
+
 Values are written with ``repr`` (exact round trip); ``topic`` must be a valid ROS name.
 """
 
@@ -156,6 +159,10 @@ def kalibr_imu_yaml(
     if cal is not None:
         lines.append(f"# calibration of sensor {_safe(cal.sensor_id)!r}, created "
                      f"{_safe(cal.created_utc)}")
+        if cal.mag is not None:
+            lines.append("# not written: the magnetometer part"
+                         + (" and its alignment to the accelerometer" if cal.mag.alignment
+                            is not None else "") + " (Kalibr's IMU model has no magnetometer)")
     if noise is not None:
         if not isinstance(noise, Mapping):
             raise CalibrationError("noise must be a mapping of Kalibr's four noise keys")

@@ -10,12 +10,19 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from ..calibration import Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ..io.motioncal import encode_motioncal
+from ..rotations import rotation_angle_deg
 from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
 
-__all__ = ["motioncal_packet"]
+__all__ = ["motioncal_losses", "motioncal_packet"]
+
+#: A gain or cross-axis term further than this from the driver's nominal scale (relative) is
+#: a calibration term the packet would lose.
+GAIN_TOLERANCE = 1e-3
 
 
 def _driver_scale(
@@ -33,8 +40,47 @@ def _driver_scale(
     return 1.0 / cpu, unit
 
 
-def motioncal_packet(
+def motioncal_losses(
     cal: Calibration, *, counts_per_unit: Mapping[str, Any] | None = None
+) -> list[str]:
+    """What of ``cal`` the MotionCal packet cannot carry, in words (empty: nothing is lost).
+
+    The packet (Adafruit_Sensor_Calibration's ``accel_zerog``, ``gyro_zerorate``, ``mag_hardiron``,
+    ``mag_softiron``, ``mag_field``) holds offsets for the accelerometer and the gyroscope and
+    no temperature terms: their gains and cross-axis terms beyond the driver's nominal scale,
+    and every temperature polynomial, stay out.
+
+    >>> import numpy as np, triaxcal as tc
+    >>> part = tc.SensorCalibration(offset=[10, 0, 0], matrix=np.diag([1.02, 1, 1]) / 16384,
+    ...                             unit="g")
+    >>> motioncal_losses(tc.Calibration(accel=part))[0][:62]
+    'accelerometer: gains and cross-axis terms up to 2 % from the d'
+    """
+    out: list[str] = []
+    for sensor, name in (("accel", "accelerometer"), ("gyro", "gyroscope")):
+        part = cal.part(sensor) if sensor in cal.sensors else None
+        if part is None:
+            continue
+        k, u = _driver_scale(part, sensor, counts_per_unit)
+        # the correction left after the driver's nominal scale, in calibrated units per unit
+        conv = 1.0 if part.unit == part.raw_unit else unit_factor(u, part.unit)
+        corr = part.matrix / (k * conv)
+        dev = float(abs(corr - np.eye(3)).max())
+        if dev > GAIN_TOLERANCE:
+            out.append(
+                f"{name}: gains and cross-axis terms up to {100 * dev:.3g} % from the driver's "
+                "nominal scale (the packet holds its offsets only)")
+    for sensor in cal.sensors:
+        if cal.part(sensor).temperature is not None:
+            out.append(f"{sensor}: temperature terms (the packet has none)")
+    return out
+
+
+def motioncal_packet(
+    cal: Calibration,
+    *,
+    counts_per_unit: Mapping[str, Any] | None = None,
+    offsets_only: bool = False,
 ) -> bytes:
     """The MotionCal packet for ``cal``.
 
@@ -53,7 +99,19 @@ def motioncal_packet(
         (:data:`triaxcal.units.DEVICE_COUNTS_PER_UNIT`):
         accel 16384 counts/g, gyro 131 counts/(deg/s), mag 10 counts/uT. Ignored for parts
         whose raw unit is already physical.
+    offsets_only : bool
+        Accept that the packet loses what :func:`motioncal_losses` lists (the accelerometer's
+        and gyroscope's gains, temperature terms). Without it such a calibration is refused,
+        so that no term is dropped unnoticed.
     """
+    if not isinstance(offsets_only, bool):
+        raise CalibrationError(f"offsets_only must be True or False, got {offsets_only!r}")
+    lost = motioncal_losses(cal, counts_per_unit=counts_per_unit)
+    if lost and not offsets_only:
+        raise CalibrationError(
+            "the MotionCal packet cannot carry all of this calibration: " + "; ".join(lost)
+            + ". Export --format c (or c-fixed) to keep every term, or accept the loss with "
+            "--offsets-only (offsets_only=True)")
     kw: dict[str, Any] = {}
     if cal.accel is not None:
         k, u = _driver_scale(cal.accel, "accel", counts_per_unit)
@@ -62,6 +120,14 @@ def motioncal_packet(
         k, u = _driver_scale(cal.gyro, "gyro", counts_per_unit)
         kw["gyro_offset"] = cal.gyro.offset * k * unit_factor(u, "rad/s")
     if cal.mag is not None:
+        al = cal.mag.alignment
+        if al is not None and rotation_angle_deg(al.rotation) > 0.01:
+            raise CalibrationError(
+                "the MotionCal packet holds a symmetric soft-iron matrix and no rotation; this "
+                f"magnetometer is aligned to the {al.to} by {rotation_angle_deg(al.rotation):.2f}"
+                " deg: export --format adafruit (its soft-iron matrix holds the rotation) or c, "
+                "or drop the alignment on purpose (--no-alignment; cal.mag.replace("
+                "alignment=None))")
         k, u = _driver_scale(cal.mag, "mag", counts_per_unit)
         ku = k * unit_factor(u, "uT")  # uT per raw unit, as the driver sees it
         # calibrated units -> uT (a part left in raw counts is scaled like the driver)

@@ -22,6 +22,12 @@ device id is ``TC_A0_ID`` when ``TC_A_ENABLE = 1``. triaxcal writes ``TREF`` = i
 temperature, ``X0 = 0`` (the constant is in ``CAL_*_OFF``) and ``TMIN``/``TMAX`` = the fitted
 range; PX4 holds the correction constant outside it, triaxcal extrapolates.
 
+A magnetometer alignment (``cal.mag.alignment``) goes to ``CAL_MAGn_ROT`` (PX4 applies
+``rotation * (S (raw - OFF))``, the rotation after the correction, so offsets and ``S`` stay in
+the sensor frame); PX4 uses it for external magnetometers only and resets it to -1 for
+internal ones (``Magnetometer::ParametersUpdate``). Only the right-angle part is held: more
+than 1 deg left over warns (``AlignmentWarning``), none within 20 deg is refused.
+
 The file is QGroundControl's parameter file: ``#`` comments and tab-separated lines
 ``vehicle-id  component-id  name  value  type`` (``type`` a MAV_PARAM_TYPE: 9 float, 6 int32),
 which QGroundControl's parameter editor loads (``src/FactSystem/ParameterManager.cc``
@@ -42,6 +48,7 @@ from ..errors import CalibrationError
 from ._params import (
     Physical,
     f32,
+    mag_mounting,
     physical,
     pick_sensors,
     require_degree,
@@ -144,6 +151,9 @@ def px4_params(
                 out.append((f"CAL_MAG{n}_{a}SCALE", float(m[i, i]), real))
             for (i, j), a in zip(((0, 1), (0, 2), (1, 2)), "XYZ"):
                 out.append((f"CAL_MAG{n}_{a}ODIAG", float(m[i, j]), real))
+            mnt = mag_mounting(cal, FMT, f"CAL_MAG{n}_ROT")
+            if mnt is not None:
+                out.append((f"CAL_MAG{n}_ROT", float(mnt.number), i32))
         if p.offset_poly is None:
             # fitted without thermal terms: the vehicle's own would be subtracted on top
             out.append((f"TC_{tc}_ENABLE", 0.0, i32))
@@ -193,7 +203,7 @@ def px4_params_file(
         f"# Calibration written by triaxcal {__version__}; sensor id "
         f"{_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
         "# accel = (raw - thermal - CAL_ACCn_OFF) * CAL_ACCn_SCALE; gyro = raw - thermal - "
-        "CAL_GYROn_OFF; mag = S (raw - CAL_MAGn_OFF)",
+        "CAL_GYROn_OFF; mag = R S (raw - CAL_MAGn_OFF), R = CAL_MAGn_ROT (external magnetometers)",
         "#",
         "# Vehicle-Id Component-Id Name Value Type",
     ]

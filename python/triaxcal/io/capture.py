@@ -6,38 +6,50 @@ The session file is written as data arrives, so nothing captured is lost: a head
 as received (integers for counts). Rows are written whole, flushed after every batch and
 ``fsync``-ed at least once a second; Ctrl-C (SIGINT) ends the capture between two batches.
 
-While capturing, an online :class:`~triaxcal.detect.PoseDetector` on the accelerometer
-columns registers still poses; each one rings the terminal bell, and a status line shows the
-samples, the poses, the share of the sphere of directions covered so far (equal-area cells
-hit) and which way to turn the board next.
+While capturing, an online :class:`~triaxcal.detect.PoseDetector` with every sensor the
+session has (:class:`~triaxcal.poses.PoseSettings`: the same detection as ``triaxcal fit
+--poses`` and ``report`` run on the saved file) registers still poses; each one rings the
+terminal bell, and a status line shows the samples, the poses, the share of the sphere of
+directions covered so far (:mod:`triaxcal.coverage`, the measure every command uses) and which
+way to turn the board next.
+
+When the board finds the poses itself (a :class:`~triaxcal.io.serial.SerialReader` with
+``board_poses``: the firmware's mode ``S``), every record is one pose and is written as one
+row, the channel means followed by ``pose_n``, the samples the board averaged; that column
+tells ``triaxcal fit`` and ``report`` that the rows are pose means already.
 """
 
 from __future__ import annotations
 
 import contextlib
-import math
+import errno
 import os
 import signal
+import stat
 import sys
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, BinaryIO, TextIO
 
 import numpy as np
 
+from ..coverage import coverage as _coverage
+from ..coverage import sphere_cells, suggest_turn
 from ..detect import Pose, PoseDetector
 from ..errors import CalibrationError
-from ..units import DEVICE_COUNTS_PER_UNIT
+from ..poses import HEAD_ROWS, POSE_N_COLUMN, PoseSettings, ResolvedPoses
+from .board_poses import BoardPoseSettings
+from .files import os_error_message
 from .protocol import CHANNELS_7, CHANNELS_10
 from .serial import ReaderStats, Record, SerialReader
 
-ACCEL_COUNTS_PER_G = DEVICE_COUNTS_PER_UNIT["accel"][0]
-
 __all__ = [
+    "POSE_N_COLUMN",
     "CaptureResult",
+    "SessionWriteError",
     "SessionWriter",
     "capture",
     "channel_names",
@@ -47,9 +59,8 @@ __all__ = [
     "suggest_turn",
 ]
 
-#: Counts per g of the accelerometer columns, per protocol (``Raw:`` is 8192 counts/g).
-UNITS_PER_G = {"binary": ACCEL_COUNTS_PER_G, "framed": ACCEL_COUNTS_PER_G,
-               "text": ACCEL_COUNTS_PER_G, "raw": 8192.0}
+
+#: The column of a session whose rows are the board's pose means (samples averaged per row).
 
 
 def channel_names(protocol: str, channels: int | None) -> tuple[str, ...]:
@@ -79,8 +90,28 @@ def _fmt(v: Any) -> str:
     return repr(float(v))
 
 
+class SessionWriteError(CalibrationError):
+    """The session file could not be written (a full disk, a file size limit, a read-only
+    or vanished place). ``rows`` whole rows are safe in ``path``; the capture stopped."""
+
+    def __init__(self, message: str, *, path: Path, rows: int) -> None:
+        super().__init__(message)
+        self.path = path
+        self.rows = rows
+
+
+# fsync is not possible on some files (pipes, some devices); that is no reason to stop.
+_FSYNC_UNSUPPORTED = {errno.EINVAL, errno.EROFS, errno.ENOTSUP,
+                      getattr(errno, "EOPNOTSUPP", errno.ENOTSUP)}
+
+
 class SessionWriter:
     """Append records to a session CSV as they arrive; nothing written is ever lost.
+
+    Rows are written whole: when the disk fills up (or the file cannot grow for another
+    reason) the file is cut back to the end of the last whole row and
+    :class:`SessionWriteError` says how many rows are safe in it. Opening a session to
+    append to it first removes a row cut short by an earlier crash.
 
     Parameters
     ----------
@@ -103,64 +134,123 @@ class SessionWriter:
         self.k = len(columns)
         self.fsync_s = float(fsync_s)
         self.rows = 0
+        self.created = False  # whether this writer made the file (so may remove it)
+        self._failed = False
+        self._synced = 0.0
         header = ",".join(self.columns)
-        exists = self.path.exists() and self.path.stat().st_size > 0
         if mode not in ("new", "append", "overwrite"):
             raise CalibrationError(f"mode must be 'new', 'append' or 'overwrite', got {mode!r}")
-        if exists and mode == "new":
-            raise CalibrationError(
-                f"{self.path} exists already: pass another --out, or --append to add to it, "
-                "or --overwrite to replace it"
-            )
-        if exists and mode == "append":
-            with open(self.path, encoding="ascii", errors="replace") as f:
-                first = f.readline().strip()
-            if first != header:
+        try:
+            st = os.stat(self.path) if self.path.exists() else None
+            regular = st is None or stat.S_ISREG(st.st_mode)
+            exists = st is not None and regular and st.st_size > 0
+            if st is not None and stat.S_ISDIR(st.st_mode):
                 raise CalibrationError(
-                    f"cannot append to {self.path}: its header {first!r} differs from "
-                    f"{header!r} (other protocol or channel count?)"
+                    f"{self.path} is a folder: give a file name inside it, e.g. "
+                    f"{self.path / 'session.csv'}"
                 )
-            self._f: TextIO = open(self.path, "a", encoding="ascii", newline="")  # noqa: SIM115
-            self._ensure_newline()
-        else:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._f = open(self.path, "w", encoding="ascii", newline="")  # noqa: SIM115
-            self._f.write(header + "\n")
+            if exists and mode == "new":
+                raise CalibrationError(
+                    f"{self.path} exists already: pass another --out, or --append to add to "
+                    "it, or --overwrite to replace it"
+                )
+            if exists and mode == "append":
+                with open(self.path, encoding="ascii", errors="replace") as f:
+                    first = f.readline(65536).strip()
+                if first != header:
+                    raise CalibrationError(
+                        f"cannot append to {self.path}: its header {first[:200]!r} differs "
+                        f"from {header!r} (other protocol or channel count?)"
+                    )
+                self._good = _drop_cut_row(self.path)
+                self._f: BinaryIO = open(self.path, "ab")  # noqa: SIM115
+            else:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self.created = st is None
+                self._f = open(self.path, "wb")  # noqa: SIM115
+                self._good = 0
+                self._put((header + "\n").encode("ascii"))
+        except OSError as exc:
+            self._fail(exc)
         self._flush(force=True)
 
-    def _ensure_newline(self) -> None:
-        with open(self.path, "rb") as f:
-            f.seek(-1, os.SEEK_END)
-            last = f.read(1)
-        if last != b"\n":  # a row cut by a crash: end it, readers skip short rows
-            self._f.write("\n")
+    def _put(self, data: bytes) -> None:
+        """Write ``data`` (whole rows), flush, and count it as safe."""
+        try:
+            self._f.write(data)
+            self._flush()
+        except OSError as exc:
+            self._fail(exc)
+        self._good += len(data)
 
     def write(self, records: Iterable[Record]) -> int:
-        """Write rows for ``records`` (host time, values), flush; returns rows written."""
+        """Write rows for ``records`` (host time, values), flush; returns rows written.
+
+        Raises
+        ------
+        SessionWriteError
+            When the rows cannot be written; the rows written before are safe.
+        """
+        if self._failed:
+            raise CalibrationError(f"{self.path}: writing has stopped after an error")
         lines = []
         for t, values in records:
             if len(values) != self.k:
                 continue  # a decoder never returns these; be safe with hand-made records
             lines.append(f"{t:.6f}," + ",".join(_fmt(v) for v in values) + "\n")
         if lines:
-            self._f.write("".join(lines))
+            self._put("".join(lines).encode("ascii"))
             self.rows += len(lines)
-            self._flush()
         return len(lines)
 
     def _flush(self, force: bool = False) -> None:
-        self._f.flush()
-        now = time.monotonic()
-        if force or now - getattr(self, "_synced", 0.0) >= self.fsync_s:
+        if self._failed:
+            return
+        try:
+            self._f.flush()
+            now = time.monotonic()
+            if force or now - self._synced >= self.fsync_s:
+                try:
+                    os.fsync(self._f.fileno())
+                except OSError as exc:
+                    if exc.errno not in _FSYNC_UNSUPPORTED:
+                        raise
+                self._synced = now
+        except OSError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        """Close, cut the file back to its last whole row, and raise SessionWriteError."""
+        self._failed = True
+        f = getattr(self, "_f", None)
+        if f is not None:
             with contextlib.suppress(OSError):
-                os.fsync(self._f.fileno())
-            self._synced = now
+                f.close()  # may try (and fail) to write what is still buffered
+        cut = False
+        good = getattr(self, "_good", 0)
+        with contextlib.suppress(OSError):
+            if stat.S_ISREG(os.stat(self.path).st_mode):
+                if os.stat(self.path).st_size > good:
+                    os.truncate(self.path, good)
+                cut = True
+        if self.rows == 0:
+            safe = "nothing was captured"
+        else:
+            safe = (f"the capture stopped; the first {self.rows} rows are safe in {self.path}"
+                    + ("" if cut else " (its last row may be cut short; triaxcal fit skips "
+                                      "such a row)"))
+        raise SessionWriteError(f"{os_error_message(exc, self.path)}; {safe}",
+                                path=self.path, rows=self.rows) from None
 
     def close(self) -> None:
         """Flush, fsync and close (idempotent)."""
-        if not self._f.closed:
-            self._flush(force=True)
+        if self._failed or self._f.closed:
+            return
+        self._flush(force=True)
+        try:
             self._f.close()
+        except OSError as exc:
+            self._fail(exc)
 
     def __enter__(self) -> SessionWriter:  # noqa: PYI034
         return self
@@ -169,53 +259,46 @@ class SessionWriter:
         self.close()
 
 
+def _drop_cut_row(path: Path) -> int:
+    """Cut a regular file back to its last line break (a row cut short by a crash); returns
+    the new size."""
+    with open(path, "rb+") as f:
+        size = f.seek(0, os.SEEK_END)
+        pos = size
+        while pos > 0:
+            step = min(65536, pos)
+            f.seek(pos - step)
+            chunk = f.read(step)
+            i = chunk.rfind(b"\n")
+            if i >= 0:
+                end = pos - step + i + 1
+                if end < size:
+                    f.truncate(end)
+                return end
+            pos -= step
+        return size
+
+
 def read_session(path: Any) -> tuple[tuple[str, ...], np.ndarray]:
     """Read a session CSV: ``(columns, data)`` with ``data`` float64 of shape (N, 1 + K).
 
-    Rows with a wrong number of fields (a row cut by a power cut) are skipped.
+    Rows that are not whole (a row cut by a power cut or a full disk) are skipped; see
+    :func:`triaxcal.io.tables.read_table` for a reader that reports them.
     """
-    with open(path, encoding="ascii", errors="replace") as f:
-        header = f.readline().strip().split(",")
-        if not header or header[0] != "t":
-            raise CalibrationError(f"{path} is not a session CSV: its first column must be 't'")
-        rows = []
-        for line in f:
-            parts = line.strip().split(",")
-            if len(parts) != len(header):
-                continue
-            try:
-                rows.append([float(p) for p in parts])
-            except ValueError:
-                continue
-    return tuple(header), np.array(rows, dtype=np.float64).reshape(-1, len(header))
+    from .tables import read_table
+
+    table = read_table(path, skip_bad_lines=True, allow_empty=True)
+    if not table.names or table.names[0] != "t":
+        raise CalibrationError(f"{path} is not a session CSV: its first column must be 't'")
+    return table.names, table.data
 
 
 # ------------------------------------------------------------------------- sphere coverage
 
 
-def sphere_cells(bands: int = 4, sectors: int = 6) -> np.ndarray:
-    """Unit vectors (bands*sectors, 3) at the centres of equal-area cells of the sphere.
-
-    Cells are ``bands`` zones of equal height in z (equal area, Archimedes' hat-box theorem)
-    times ``sectors`` equal slices of longitude.
-    """
-    z = 1.0 - (np.arange(bands) + 0.5) * 2.0 / bands
-    lon = (np.arange(sectors) + 0.5) * 2.0 * math.pi / sectors
-    zz, ll = np.meshgrid(z, lon, indexing="ij")
-    r = np.sqrt(1.0 - zz**2)
-    return np.stack([r * np.cos(ll), r * np.sin(ll), zz], axis=-1).reshape(-1, 3)
-
-
-def _cell_index(dirs: np.ndarray, bands: int, sectors: int) -> np.ndarray:
-    u = dirs / np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
-    band = np.clip(((1.0 - u[:, 2]) * bands / 2.0).astype(int), 0, bands - 1)
-    lon = np.mod(np.arctan2(u[:, 1], u[:, 0]), 2.0 * math.pi)
-    sector = np.clip((lon * sectors / (2.0 * math.pi)).astype(int), 0, sectors - 1)
-    return band * sectors + sector
-
-
-def coverage(points: Any, *, center: Any = None, bands: int = 4, sectors: int = 6) -> float:
-    """Fraction (0..1) of the equal-area cells of :func:`sphere_cells` hit by ``points``.
+def coverage(points: Any, *, center: Any = None) -> float:
+    """Fraction (0..1) of the sphere covered by ``points``: the shared measure of
+    :func:`triaxcal.coverage.coverage` (equal-area cells hit), as the status line shows it.
 
     ``points`` (N, 3) are readings (e.g. pose means of the accelerometer); their directions
     from ``center`` (default: the origin, fine for raw counts whose offset is small compared
@@ -229,85 +312,7 @@ def coverage(points: Any, *, center: Any = None, bands: int = 4, sectors: int = 
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0:
         return 0.0
-    if center is not None:
-        pts = pts - np.asarray(center, dtype=np.float64)
-    hit = np.unique(_cell_index(pts, bands, sectors))
-    return len(hit) / (bands * sectors)
-
-
-_AXES = ("X", "Y", "Z")
-
-
-def _describe(d: np.ndarray) -> str:
-    """Words for 'this body direction points up': '+Z up', '+X and -Z up'."""
-    order = np.argsort(-np.abs(d))
-    main = [order[0]]
-    if abs(d[order[1]]) > 0.5 * abs(d[order[0]]):
-        main.append(order[1])
-    parts = [("+" if d[i] > 0 else "-") + _AXES[i] for i in main]
-    return " and ".join(parts) + " up"
-
-
-def suggest_turn(
-    points: Any, current: Any = None, *, bands: int = 4, sectors: int = 6
-) -> str:
-    """Which way to turn the board next, in words, towards the emptiest part of the sphere.
-
-    Parameters
-    ----------
-    points : array_like (N, 3)
-        Accelerometer readings of the poses so far (any units; the direction matters).
-    current : array_like (3,), optional
-        The accelerometer reading now (default: the last point).
-
-    Returns
-    -------
-    str
-        E.g. ``"turn it upside down (-Z and +X up)"``, ``"tilt the +X side up (+X up)"``, or
-        ``"every direction covered"``.
-
-    Examples
-    --------
-    >>> suggest_turn([[0, 0, 1.0]])
-    'turn it upside down (-Z and +X up)'
-    >>> suggest_turn([[0, 0, 1.0], [0, 0, -1.0]], [0, 0, 1.0])
-    'tilt the +X side up (+X and +Y up)'
-    """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    cells = sphere_cells(bands, sectors)
-    if len(pts):
-        hit = set(np.unique(_cell_index(pts, bands, sectors)).tolist())
-        u = pts / np.maximum(np.linalg.norm(pts, axis=1, keepdims=True), 1e-300)
-        # the empty cell farthest from every pose
-        empty = [i for i in range(len(cells)) if i not in hit]
-        if not empty:
-            return "every direction covered: add poses anywhere or stop"
-        cand = cells[empty]
-        gap = (cand @ u.T).max(axis=1)
-        target = cand[int(np.argmin(gap))]
-    else:
-        target = np.array([0.0, 0.0, 1.0])
-    now = np.asarray(current, dtype=np.float64) if current is not None else (
-        pts[-1] if len(pts) else np.array([0.0, 0.0, 1.0])
-    )
-    now = now / max(float(np.linalg.norm(now)), 1e-300)
-    # snap the target to the nearest axis or axis pair, which is easier to aim for
-    aim = _describe(target)
-    if not len(pts):
-        return "hold it still to register the first pose"
-    if float(now @ target) > 0.9:
-        return f"hold it still here ({aim})"
-    if float(now @ target) < -0.7:
-        return f"turn it upside down ({aim})"
-    push = target - now * float(now @ target)  # the side that must rise
-    i = int(np.argmax(np.abs(push)))
-    side = ("+" if push[i] > 0 else "-") + _AXES[i]
-    other = ("-" if push[i] > 0 else "+") + _AXES[i]
-    if abs(push[i]) < 1e-9:
-        return f"turn it to {aim}"
-    if push[i] > 0:
-        return f"tilt the {side} side up ({aim})"
-    return f"tilt the {other} side down ({aim})"
+    return _coverage(pts, center=center).fraction
 
 
 # --------------------------------------------------------------------------------- capture
@@ -321,7 +326,13 @@ class CaptureResult:
     (means over all channels, sample indices into the session's rows); ``coverage`` fraction
     of the sphere cells hit; ``stopped_by`` one of ``"samples"``, ``"poses"``,
     ``"duration"``, ``"stop"``, ``"interrupt"``; ``elapsed_s``; ``stats`` the reader's
-    counters; ``events`` the (kind, message) pairs the reader reported.
+    counters; ``events`` the (kind, message) pairs the reader reported; ``detection`` the pose
+    settings with the values the data decided (counts per g, sample rate), which replay the
+    same poses on the saved session (:func:`triaxcal.poses.session_poses`); ``thresholds``
+    each sensor's threshold in its raw units (learnt ones as learnt). When the board found the
+    poses (``board_poses``), each pose is one row of the session (``start``, ``end`` are its
+    row index and the next; ``n`` the samples the board averaged), ``detection`` is None and
+    ``board_settings`` holds the settings the board reported.
     """
 
     path: Path
@@ -332,6 +343,9 @@ class CaptureResult:
     elapsed_s: float
     stats: ReaderStats
     events: tuple[tuple[str, str], ...] = field(default=())
+    detection: PoseSettings | None = None
+    thresholds: dict[str, float | None] = field(default_factory=dict)
+    board_settings: BoardPoseSettings | None = None
 
 
 class _Status:
@@ -405,14 +419,16 @@ def capture(
     stop: threading.Event | None = None,
     mode: str = "new",
     columns: Sequence[str] | None = None,
-    accel_columns: Sequence[int] = (0, 1, 2),
+    accel_columns: Sequence[int] | None = None,
     units_per_g: float | None = None,
     window: int = 25,
     hold_windows: int = 4,
     threshold_g: float = 0.07,
+    detection: PoseSettings | None = None,
     progress: TextIO | None = sys.stderr,
     bell: bool = True,
     handle_sigint: bool = True,
+    on_records: Callable[[list[Record]], None] | None = None,
 ) -> CaptureResult:
     """Capture records from ``reader`` into the session CSV ``out`` until told to stop.
 
@@ -432,21 +448,29 @@ def capture(
         What to do with an existing ``out``.
     columns : sequence of str, optional
         Channel names (default :func:`channel_names`).
-    accel_columns : 3 ints
-        Channels of the accelerometer, for pose detection and coverage.
-    units_per_g : float, optional
-        Accelerometer counts per g (default 16384, or 8192 for ``raw``).
-    window, hold_windows, threshold_g
-        Pose detection (:class:`~triaxcal.detect.PoseDetector`): samples per averaging
-        window; a pose is registered (and the bell rings) after ``hold_windows`` steady
-        windows; steady means every axis of the window mean moved by at most
-        ``threshold_g`` g (the seed's 0.07 g).
+    accel_columns : 3 ints, optional
+        Channels of the accelerometer, for pose detection and coverage (default: the ones
+        named ``ax ay az``, else the first three).
+    units_per_g, window, threshold_g, hold_windows
+        Shorthands for ``detection`` (:class:`~triaxcal.poses.PoseSettings` ``counts_per_g``
+        -- default: from the first readings --, ``window``, ``accel_threshold_g`` and
+        ``hold_windows``: a pose is registered, and the bell rings, once it has been still for
+        that many windows), used when ``detection`` is not given.
+    detection : PoseSettings, optional
+        Pose detection: a pose ends when any sensor of the session says the board moved (the
+        same settings give the same poses in ``triaxcal fit --poses`` on the saved file).
+        The detector starts once the first :data:`~triaxcal.poses.HEAD_ROWS` rows are in
+        (they fix the counts per g and, for a hold-off, the sample rate).
     progress : text stream or None
         Where the status line goes (``None``: silent).
     bell : bool
         Ring the terminal bell (``\\a``) on each registered pose.
     handle_sigint : bool
         Turn the first Ctrl-C into a clean stop (main thread only).
+    on_records : callable(records), optional
+        Called in the capture loop with every non-empty batch of records, right after they
+        were written to the session (the live page, :mod:`triaxcal.live`, watches the stream
+        this way). It must return quickly; an exception it raises ends the capture.
 
     Returns
     -------
@@ -455,7 +479,6 @@ def capture(
     for name, v in (("samples", samples), ("poses", poses)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
             raise CalibrationError(f"{name} must be a whole number >= 1, got {v!r}")
-    upg = float(units_per_g) if units_per_g is not None else UNITS_PER_G[reader.protocol]
     names = tuple(columns) if columns is not None else channel_names(
         reader.protocol, reader.channels
     )
@@ -470,11 +493,20 @@ def capture(
             user_event(kind, msg)
 
     reader.on_event = on_event
-    detect = len(names) >= 3 and max(accel_columns) < len(names)
-    detector = PoseDetector(
-        window=window, threshold=threshold_g * upg, units_per_g=upg,
-        max_windows=max(2, hold_windows), columns=tuple(accel_columns),
-    ) if detect else None
+    settings = detection if detection is not None else PoseSettings(
+        window=window, accel_threshold_g=threshold_g, counts_per_g=units_per_g,
+        hold_windows=max(2, int(hold_windows)))
+    cols = tuple(accel_columns) if accel_columns is not None else None
+    if cols is None and not all(c in names for c in ("ax", "ay", "az")):
+        cols = (0, 1, 2)
+    board = getattr(reader, "board_poses", None) is not None
+    live: _LivePoses | _BoardPoses | None
+    if board:
+        if not names or names[-1] != POSE_N_COLUMN:
+            names = (*names, POSE_N_COLUMN)
+        live = _BoardPoses(names, reader, on_event)
+    else:
+        live = _LivePoses(settings, names, cols) if len(names) >= 3 else None
     registered: list[Pose] = []
     interrupted = threading.Event()
     t0 = time.monotonic()
@@ -502,12 +534,16 @@ def capture(
                 if samples is not None:
                     recs = recs[: samples - writer.rows]
                 writer.write(recs)
-                if recs and detector is not None:
-                    vals = np.array([r.values for r in recs], dtype=np.float64)
-                    last = vals[-1, list(accel_columns)]
-                    for p in detector.update(vals):
-                        registered.append(p)
-                        status.ring()
+                if recs and on_records is not None:
+                    on_records(recs)
+                if recs and live is not None:
+                    for p in live.update(recs):
+                        if poses is None or len(registered) < poses:
+                            registered.append(p)
+                            status.ring()
+                    last = live.last
+                if isinstance(live, _BoardPoses):
+                    last = live.watch()
                 if samples is not None and writer.rows >= samples:
                     stopped_by = "samples"
                     break
@@ -525,15 +561,16 @@ def capture(
                     elif time.monotonic() - quiet_since > 0.3:
                         stopped_by = "stop"
                         break
-                status.line(_status_text(writer.rows, registered, accel_columns, last,
-                                         reader, poses, samples))
+                status.line(_status_text(writer.rows, registered, live, last, reader, poses,
+                                         samples))
     except KeyboardInterrupt:
         stopped_by = "interrupt"
     except BaseException:
         # a failed start (silent board, wrong baud rate) leaves no empty session behind that
         # would block running the same command again
-        writer.close()
-        if writer.rows == 0 and mode != "append":
+        with contextlib.suppress(CalibrationError):
+            writer.close()
+        if writer.rows == 0 and writer.created and writer.path.is_file():
             with contextlib.suppress(OSError):
                 writer.path.unlink()
         status.end()
@@ -542,9 +579,17 @@ def capture(
         writer.close()
         reader.close()
         reader.on_event = user_event
-    cov = coverage([p.mean[list(accel_columns)] for p in registered]) if registered else 0.0
-    status.line(_status_text(writer.rows, registered, accel_columns, last, reader, poses,
-                             samples), force=True)
+    if live is not None and stopped_by != "poses":
+        # the end of the stream decides on the pose in progress
+        registered += live.finish()[: None if poses is None else poses - len(registered)]
+    if live is not None and live.det is not None:
+        # the same poses, each averaged over its whole still run (the bell rang earlier)
+        registered = live.det.poses[:len(registered)]
+    if isinstance(live, _BoardPoses):
+        live.watch()
+    cov = coverage(live.points(registered)) if live is not None and registered else 0.0
+    status.line(_status_text(writer.rows, registered, live, last, reader, poses, samples),
+                force=True)
     status.end()
     return CaptureResult(
         path=writer.path,
@@ -555,23 +600,148 @@ def capture(
         elapsed_s=time.monotonic() - t0,
         stats=reader.stats,
         events=tuple(events),
+        detection=live.settings if live is not None else None,
+        thresholds=live.thresholds if live is not None else {},
+        board_settings=live.board_settings if isinstance(live, _BoardPoses) else None,
     )
+
+
+class _BoardPoses:
+    """The board's own poses (firmware mode ``S``): every record is one pose, ``(*means, n)``."""
+
+    det = None
+    settings = None
+
+    def __init__(self, names: Sequence[str], reader: SerialReader, on_event: Any) -> None:
+        self.names = tuple(names)
+        self.reader = reader
+        self.on_event = on_event
+        self.rows = 0
+        self.last: np.ndarray | None = None
+        self.board_settings: BoardPoseSettings | None = None
+        self.thresholds: dict[str, float | None] = {}
+        named = all(c in self.names for c in ("ax", "ay", "az"))
+        self.accel_columns = tuple(self.names.index(c) for c in ("ax", "ay", "az")) if named \
+            else (0, 1, 2)
+
+    def update(self, recs: Sequence[Record]) -> list[Pose]:
+        out = []
+        for r in recs:
+            if len(r.values) != len(self.names):
+                continue
+            mean = np.asarray(r.values[:-1], dtype=np.float64)
+            out.append(Pose(start=self.rows, end=self.rows + 1, mean=mean, n=int(r.values[-1])))
+            self.rows += 1
+        return out
+
+    def watch(self) -> np.ndarray | None:
+        """Follow the board's status: its last window's accelerometer mean (for the next-turn
+        hint) and the settings it reports (told once if they differ from those sent)."""
+        dec = self.reader.decoder
+        st = getattr(dec, "status", None)
+        if st is not None:
+            self.last = np.asarray(st.accel, dtype=np.float64)
+        got = getattr(dec, "settings", None)
+        if got is not None and got != self.board_settings:
+            self.board_settings = got
+            sent = self.reader.board_poses
+            gyro = got.gyro_threshold
+            self.thresholds = {"accel": float(got.accel_threshold),
+                               "gyro": float(gyro) if gyro else None}
+            if sent is not None and got != sent:
+                refused = getattr(dec, "settings_accepted", None) is False
+                self.on_event("settings", f"the board uses other pose settings than sent "
+                              f"({got.to_dict()} instead of {sent.to_dict()})"
+                              + (": it refused them" if refused else ""))
+        return self.last
+
+    def finish(self) -> list[Pose]:
+        return []
+
+    def points(self, poses: Sequence[Pose]) -> np.ndarray:
+        cols = list(self.accel_columns)
+        return np.array([p.mean[cols] for p in poses]).reshape(-1, 3)
+
+
+class _LivePoses:
+    """The capture's pose detector: started once the first rows fix what the data decide."""
+
+    def __init__(self, settings: PoseSettings, names: Sequence[str],
+                 accel: Sequence[int] | None) -> None:
+        self.base = settings
+        self.names = tuple(names)
+        self.accel = accel
+        self.head: list[Record] = []
+        self.det: PoseDetector | None = None
+        self.how: ResolvedPoses | None = None
+        self.last: np.ndarray | None = None
+
+    def _start(self) -> list[Pose]:
+        vals = np.array([r.values for r in self.head], dtype=np.float64)
+        # the times as the session file stores them, so that a fit of the file agrees
+        t = np.array([float(f"{r.t:.6f}") for r in self.head])
+        self.how = self.base.resolve(self.names, vals, accel=self.accel, t=t)
+        self.det = self.how.detector()
+        self.head = []
+        return self.det.update(vals)
+
+    def update(self, recs: Sequence[Record]) -> list[Pose]:
+        recs = [r for r in recs if len(r.values) == len(self.names)]
+        if not recs:
+            return []
+        vals = np.array([r.values for r in recs], dtype=np.float64)
+        cols = list(self.accel_columns)
+        self.last = vals[-1, cols] if cols else None
+        if self.det is None:
+            self.head += recs
+            return self._start() if len(self.head) >= HEAD_ROWS else []
+        return self.det.update(vals)
+
+    def finish(self) -> list[Pose]:
+        if self.det is None:
+            if not self.head:
+                return []
+            new = self._start()
+        else:
+            new = []
+        assert self.det is not None
+        return new + self.det.finish()
+
+    @property
+    def accel_columns(self) -> tuple[int, ...]:
+        if self.how is not None:
+            return tuple(self.how.kwargs["columns"])
+        if self.accel is not None:
+            return tuple(self.accel)
+        return tuple(self.names.index(c) for c in ("ax", "ay", "az"))
+
+    def points(self, poses: Sequence[Pose]) -> np.ndarray:
+        cols = list(self.accel_columns)
+        return np.array([p.mean[cols] for p in poses]).reshape(-1, 3)
+
+    @property
+    def settings(self) -> PoseSettings | None:
+        return self.base.with_resolved(self.how) if self.how is not None else None
+
+    @property
+    def thresholds(self) -> dict[str, float | None]:
+        return self.det.thresholds if self.det is not None else {}
 
 
 def _status_text(
     rows: int,
     registered: list[Pose],
-    cols: Sequence[int],
+    live: _LivePoses | _BoardPoses | None,
     last: Any,
     reader: SerialReader,
     want_poses: int | None,
     want_samples: int | None,
 ) -> str:
-    pts = np.array([p.mean[list(cols)] for p in registered]).reshape(-1, 3)
+    pts = live.points(registered) if live is not None else np.zeros((0, 3))
     cov = coverage(pts) if len(pts) else 0.0
     s = f"{rows}" + (f"/{want_samples}" if want_samples else "") + " samples"
     s += f"  {len(registered)}" + (f"/{want_poses}" if want_poses else "") + " poses"
-    s += f"  sphere {100 * cov:.0f}%"
+    s += f"  coverage {100 * cov:.0f} %"
     dropped = reader.stats.dropped
     if dropped:
         s += f"  dropped {dropped}"

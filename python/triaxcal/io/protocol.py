@@ -24,7 +24,9 @@ Four protocols (``PROTOCOLS``), all carrying K signed 16-bit counts per record:
 Malformed input is skipped and counted in the decoder's :class:`DecoderStats`; decoders never
 raise on any bytes, and no decoder buffers more than a bounded number of bytes.
 
-The MotionCal calibration packet a host sends to a board is :mod:`triaxcal.io.motioncal`.
+The MotionCal calibration packet a host sends to a board is :mod:`triaxcal.io.motioncal`; the
+firmware's still-pose mode (``S``: one framed record per pose found on the board) is
+:mod:`triaxcal.io.board_poses`.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 :class:`SerialReader` opens the port, switches the board to the chosen protocol with a mode
 byte (``firmware/README.md``: ``P`` polled, ``B`` binary, ``F`` framed, ``T`` text, ``R``
-``Raw:``), and
+``Raw:``, ``S`` still poses found on the board: :mod:`triaxcal.io.board_poses`), and
 returns records as they arrive, each with the host time at which it arrived. Decoding is done
 by the pure decoders of :mod:`triaxcal.io.protocol`; this module only moves bytes.
 
@@ -41,6 +41,8 @@ import serial
 import serial.tools.list_ports
 
 from ..errors import CalibrationError
+from .board_poses import MODE_BYTE as POSES_MODE_BYTE
+from .board_poses import BoardPoseDecoder, BoardPoseSettings
 from .protocol import PROTOCOLS, DecoderStats, make_decoder
 
 try:  # a vanished POSIX port can also fail in tcflush/tcsetattr with termios.error
@@ -194,6 +196,17 @@ class SerialReader:
     on_event : callable(kind, message), optional
         Called with ``("disconnected" | "reconnected" | "silent" | "garbage" | "resumed",
         message)``.
+    board_poses : BoardPoseSettings, optional
+        ``framed`` only: the board finds the still poses itself (firmware mode ``S``). After
+        opening, the reader stops any stream, sends these settings and the mode byte ``S``;
+        each record is then one pose, ``(*means, n)`` (:class:`~triaxcal.io.board_poses.
+        BoardPoseDecoder`, whose ``status`` and ``settings`` say what the board reports).
+
+    Attributes
+    ----------
+    on_bytes : callable(bytes) or None
+        Called (in the reading thread) with every chunk of bytes read, before decoding; the
+        live page listens this way for a board's ``Cal1:``/``Cal2:`` echo while streaming.
 
     Examples
     --------
@@ -227,6 +240,7 @@ class SerialReader:
         reconnect: bool = True,
         reconnect_timeout_s: float | None = None,
         on_event: Callable[[str, str], None] | None = None,
+        board_poses: BoardPoseSettings | None = None,
     ) -> None:
         if protocol not in PROTOCOLS:
             raise CaptureError(f"unknown protocol {protocol!r}: use one of {', '.join(PROTOCOLS)}")
@@ -236,7 +250,13 @@ class SerialReader:
         self.port_name = str(port)
         self.protocol = protocol
         self.polled = protocol == "binary" and not stream
-        self.decoder = make_decoder(protocol, channels, polled=self.polled)
+        if board_poses is not None and (protocol != "framed" or
+                                        not isinstance(board_poses, BoardPoseSettings)):
+            raise CaptureError("board poses come in the framed protocol: use protocol='framed' "
+                               "and a BoardPoseSettings")
+        self.board_poses = board_poses
+        self.decoder = (BoardPoseDecoder(channels) if board_poses is not None
+                        else make_decoder(protocol, channels, polled=self.polled))
         self.channels = getattr(self.decoder, "channels", channels)
         self.request = parse_request_byte(request_byte)
         self.switch_mode = bool(switch_mode)
@@ -254,6 +274,7 @@ class SerialReader:
         self.reconnect = bool(reconnect)
         self.reconnect_timeout_s = reconnect_timeout_s
         self.on_event = on_event
+        self.on_bytes: Callable[[bytes], None] | None = None
         self.stats = ReaderStats(decoder=self.decoder.stats)
         self._port: serial.Serial | None = None
         self._disconnected_at: float | None = None
@@ -317,11 +338,22 @@ class SerialReader:
                 ) from None
             raise CaptureError(f"could not open {self.port_name!r}: {exc}") from None
         try:
-            if self.switch_mode:
+            if self.switch_mode and self.board_poses is not None:
+                # stop a stream, drop what it sent, then the settings and 'S': the board's
+                # answer (its settings) stays in the buffer for the decoder
+                port.write(b"P")
+                port.flush()
+                time.sleep(0.02)
+                port.reset_input_buffer()
+                port.write(self.board_poses.packet() + POSES_MODE_BYTE)
+                port.flush()
+            elif self.switch_mode:
                 port.write(mode_byte(self.protocol, polled=self.polled))
                 port.flush()
                 time.sleep(0.02)
-            port.reset_input_buffer()
+                port.reset_input_buffer()
+            else:
+                port.reset_input_buffer()
         except _PORT_ERRORS as exc:
             with contextlib.suppress(Exception):
                 port.close()
@@ -365,12 +397,14 @@ class SerialReader:
         if self._disconnected_at is not None:
             self._try_reconnect()
             return []
+        beats = getattr(self.decoder, "heartbeats", 0)
         try:
             recs = self._poll() if self.polled else self._read_stream()
         except _PORT_ERRORS as exc:
             self._lost(exc)
             return []
-        self._check_health(bool(recs))
+        # a board finding poses is alive when it sends its status, though no pose came yet
+        self._check_health(bool(recs) or getattr(self.decoder, "heartbeats", 0) != beats)
         self.stats.records += len(recs)
         return recs
 
@@ -419,7 +453,26 @@ class SerialReader:
             return []
         return [Record(t, recs[0])]
 
+    def write(self, data: bytes) -> None:
+        """Write ``data`` to the board (e.g. a MotionCal packet) while reading goes on.
+
+        Safe to call from another thread than the one reading. Raises :class:`CaptureError`
+        when the port is not open or the cable is pulled.
+        """
+        port = self._port
+        if port is None or self._disconnected_at is not None:
+            raise CaptureError(
+                f"{self.port_name} is not connected: plug the board in and try again"
+            )
+        try:
+            port.write(bytes(data))
+            port.flush()
+        except _PORT_ERRORS as exc:
+            raise CaptureError(f"writing to {self.port_name} failed: {exc}") from None
+
     def _seen(self, data: bytes) -> None:
+        if data and self.on_bytes is not None:
+            self.on_bytes(data)
         self._bytes_since_record += len(data)
         if len(self._first_bytes) < 32:
             self._first_bytes += data[: 32 - len(self._first_bytes)]
@@ -451,6 +504,12 @@ class SerialReader:
                 hint = (
                     f"it did not answer the request byte {self.request!r} (polled binary); "
                     "if it streams by itself, add --stream or pick its --protocol"
+                )
+            elif self.switch_mode and self.board_poses is not None:
+                hint = (
+                    "it sent nothing after the mode byte 'S'; does its firmware have the "
+                    "still-pose mode (triaxcal firmware, firmware/README.md)? Without it, "
+                    "capture without --board-poses"
                 )
             elif self.switch_mode:
                 mb = mode_byte(self.protocol, polled=False).decode()

@@ -7,8 +7,25 @@
 * :mod:`~triaxcal.methods.temperature` -- offsets and gains as polynomials in temperature.
 * :mod:`~triaxcal.methods.static` -- methods that need no fit: tilt rig, six-position
   min/max, Ferraris closed form.
+* :mod:`~triaxcal.methods.allan` -- overlapping Allan deviation, streamed through the Rust core.
+* :mod:`~triaxcal.methods.bootstrap` -- bootstrap confidence intervals of fit coefficients.
+* :mod:`~triaxcal.methods.noise` -- noise figures (random walks, bias instability) and Kalibr's
+  noise keys.
+* :mod:`~triaxcal.methods.yaw` -- yaw-only magnetometer calibration (turns about the
+  vertical, the vertical part from the World Magnetic Model).
+* :mod:`~triaxcal.methods.alignment` -- magnetometer-to-accelerometer alignment, mounting
+  rotation, dip angle, tilt-compensated heading.
 """
 
+from .alignment import (
+    AlignmentWarning,
+    MagAccelAlignment,
+    align_mag_accel,
+    axis_heading,
+    heading_errors,
+)
+from .allan import AllanAccumulator, AllanDeviation, allan
+from .bootstrap import BootstrapIntervals, bootstrap
 from .gyro import (
     GyroBias,
     GyroGains,
@@ -20,6 +37,7 @@ from .gyro import (
     gyro_gains,
 )
 from .imu import ImuCalibration, SweepStep, TriadCalibration, calibrate_imu
+from .noise import AxisNoise, NoiseFigures, kalibr_noise, noise_figures, plot_allan
 from .static import (
     FerrarisCalibration,
     SixPosition,
@@ -29,8 +47,26 @@ from .static import (
     tilt_rig,
 )
 from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .yaw import YawCalibration, fit_yaw
 
 __all__ = [
+    "AllanAccumulator",
+    "AllanDeviation",
+    "AxisNoise",
+    "BootstrapIntervals",
+    "NoiseFigures",
+    "allan",
+    "bootstrap",
+    "kalibr_noise",
+    "noise_figures",
+    "plot_allan",
+    "YawCalibration",
+    "fit_yaw",
+    "AlignmentWarning",
+    "MagAccelAlignment",
+    "align_mag_accel",
+    "axis_heading",
+    "heading_errors",
     "FerrarisCalibration",
     "GyroBias",
     "GyroGains",

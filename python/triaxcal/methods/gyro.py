@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _options as opt
 from .._validate import as_samples
 from ..detect import Rejection, detect_poses, detect_still
 from ..errors import CalibrationError
@@ -59,18 +60,33 @@ def _as_rate(gyro: Any, name: str = "gyro") -> np.ndarray:
 
 def _times(n: int, t: Any, rate_hz: float | None) -> np.ndarray:
     if t is not None:
-        tt = np.asarray(t, dtype=np.float64).reshape(-1)
-        if tt.shape[0] != n:
-            raise CalibrationError(f"t has {tt.shape[0]} time stamps for {n} samples")
-        if not np.isfinite(tt).all() or np.any(np.diff(tt) <= 0):
-            raise CalibrationError("t must be finite and strictly increasing (seconds)")
-        return tt
+        return _as_times(t, n)
     if rate_hz is None:
         raise CalibrationError("give the sample time stamps t (s) or the sampling rate rate_hz")
-    rate = float(rate_hz)
-    if not (np.isfinite(rate) and rate > 0):
-        raise CalibrationError(f"rate_hz must be > 0, got {rate_hz!r}")
+    rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
     return np.arange(n) / rate
+
+
+def _as_times(t: Any, n: int) -> np.ndarray:
+    arr = np.asarray(t) if not isinstance(t, (str, bytes)) else np.asarray([t])
+    if arr.dtype.kind not in "iuf":
+        raise CalibrationError(f"t must hold real numbers (seconds), got dtype {arr.dtype}")
+    tt = arr.astype(np.float64).reshape(-1)
+    if tt.shape[0] != n:
+        raise CalibrationError(f"t has {tt.shape[0]} time stamps for {n} samples")
+    if not np.isfinite(tt).all() or np.any(np.diff(tt) <= 0):
+        raise CalibrationError("t must be finite and strictly increasing (seconds)")
+    return tt
+
+
+def _mean_rate(tt: np.ndarray) -> float:
+    """Samples per second over the whole recording.
+
+    Not ``1 / median(diff(t))``: a logger that stamps samples when it reads them from the
+    sensor's FIFO gives bursts of close stamps (sunsided's MPU-6050 files: median step 2 ms at
+    a true 100 Hz), and the median step would make a detector window five times too short.
+    """
+    return (tt.shape[0] - 1) / float(tt[-1] - tt[0])
 
 
 def integrate_rate(rate: Any, t: Any) -> np.ndarray:
@@ -87,8 +103,8 @@ def integrate_rate(rate: Any, t: Any) -> np.ndarray:
     >>> integrate_rate(rate, t)[-1].round(6).tolist()
     [90.0, 0.0, 90.0]
     """
-    r = np.asarray(rate, dtype=np.float64)
-    tt = np.asarray(t, dtype=np.float64)
+    r = as_samples(rate, "rate", finite=True)
+    tt = _as_times(t, r.shape[0])
     out = np.zeros_like(r)
     out[1:] = np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(tt)[:, None], axis=0)
     return out
@@ -119,8 +135,9 @@ def gyro_bias(
     gyro : array_like, shape (N, 3)
         Raw gyro readings (counts, or deg/s, rad/s).
     intervals : sequence of (start, end), optional
-        Still intervals (sample indices, end exclusive). ``None``: with ``rate_hz`` given, they
-        are found by :func:`triaxcal.detect_still` (the first ``rest_s`` seconds must be
+        Still intervals (sample indices, ``0 <= start < end <= N``, end exclusive; intervals
+        outside the recording are refused, not clipped). ``None``: with ``rate_hz`` given,
+        they are found by :func:`triaxcal.detect_still` (the first ``rest_s`` seconds must be
         still); without it, the whole recording is taken as still.
     rate_hz : float, optional
         Sampling rate, Hz, for the detection.
@@ -132,16 +149,17 @@ def gyro_bias(
     GyroBias
     """
     g = _as_rate(gyro)
+    rest = opt.number(rest_s, "rest_s", gt=0, hint="seconds of initial rest")
     if intervals is None:
         if rate_hz is None:
             iv = [(0, g.shape[0])]
         else:
+            rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
             iv = detect_still(
-                g, rate_hz=rate_hz, rest_s=rest_s, window_s=min(1.0, rest_s)
+                g, rate_hz=rate, rest_s=rest, window_s=min(1.0, rest)
             ).intervals
     else:
-        iv = [(int(a), int(b)) for a, b in intervals]
-    iv = [(max(a, 0), min(b, g.shape[0])) for a, b in iv if min(b, g.shape[0]) > max(a, 0)]
+        iv = opt.intervals(intervals, "intervals", g.shape[0])
     if not iv:
         raise CalibrationError(
             "no still period in the gyro recording: leave the sensor at rest for a few seconds "
@@ -184,6 +202,26 @@ class Rotation:
         return f"{AXES[self.axis]} {self.direction}"
 
 
+def _turn(cum: np.ndarray, a: int, b: int) -> Rotation:
+    """The rotation integrated over samples a..b-1 (``cum`` from :func:`integrate_rate`)."""
+    integ = cum[b - 1] - cum[a]
+    ax = int(np.argmax(np.abs(integ)))
+    norm = float(np.linalg.norm(integ))
+    purity = abs(float(integ[ax])) / norm if norm > 0 else 0.0
+    return Rotation(a, b, _ro(integ), ax, "ccw" if integ[ax] > 0 else "cw", purity)
+
+
+WHOLE = "whole"
+
+
+def _still_periods(g: np.ndarray, tt: np.ndarray, intervals: Any, rest_s: float,
+                   window_s: float, k: float, min_still_s: float) -> list[tuple[int, int]]:
+    if intervals is not None:
+        return opt.intervals(intervals, "intervals", g.shape[0])
+    return detect_still(g, rate_hz=_mean_rate(tt), window_s=window_s, rest_s=rest_s, k=k,
+                        min_duration_s=min_still_s).intervals
+
+
 def find_rotations(
     gyro: Any,
     *,
@@ -191,6 +229,7 @@ def find_rotations(
     rate_hz: float | None = None,
     offset: Any = None,
     intervals: Sequence[tuple[int, int]] | None = None,
+    turns: Sequence[tuple[int, int]] | str | None = None,
     rest_s: float = 3.0,
     window_s: float = 0.5,
     k: float = 4.0,
@@ -203,35 +242,77 @@ def find_rotations(
     rotation; ``gyro - offset`` is integrated over it with the trapezoid rule on the time
     stamps ``t`` (or a uniform ``rate_hz``).
 
+    Parameters
+    ----------
+    gyro : array_like, shape (N, 3)
+        Raw gyro readings.
+    t, rate_hz
+        Time stamps (s, strictly increasing), or a uniform sampling rate (Hz).
+    offset : array_like (3,), optional
+        Bias in the gyro's units; ``None``: the mean over the still periods.
+    intervals : sequence of (start, end), optional
+        Still periods (sample indices, end exclusive); ``None``: detected.
+    turns : None, "whole" or sequence of (start, end)
+        ``None``: every gap between two still periods is a rotation. ``"whole"``: one rotation
+        from the end of the first still period to the start of the last one (a rest at the
+        start and at the end, the turns in between without pauses: any slow-down in the
+        middle is part of the turn). A sequence: these sample intervals (end exclusive) are
+        the rotations, whatever the detector says; give ``offset`` (from a recording at rest,
+        :func:`gyro_bias`) if the recording has no still period of its own.
+    rest_s, window_s, k, min_still_s
+        Options of the still detector (:func:`triaxcal.detect_still`), seconds.
+
     Returns
     -------
     list of Rotation
     """
     g = _as_rate(gyro)
     tt = _times(g.shape[0], t, rate_hz)
-    rate = 1.0 / float(np.median(np.diff(tt)))
-    if intervals is None:
-        iv = detect_still(g, rate_hz=rate, window_s=window_s, rest_s=rest_s, k=k,
-                          min_duration_s=min_still_s).intervals
-    else:
-        iv = sorted((int(a), int(b)) for a, b in intervals)
+    rest = opt.number(rest_s, "rest_s", gt=0, hint="seconds of initial rest")
+    win = opt.number(window_s, "window_s", gt=0, hint="seconds")
+    kk = opt.number(k, "k", gt=0, hint="threshold multiplier of the still detector")
+    min_still = opt.number(min_still_s, "min_still_s", ge=0, hint="seconds")
+    off = None if offset is None else opt.vector3(offset, "offset", hint="gyro bias")
+    explicit = None
+    if turns is not None and not (isinstance(turns, str) and turns == WHOLE):
+        if isinstance(turns, str):
+            raise CalibrationError(
+                f"turns must be None, {WHOLE!r} or a sequence of (start, end) sample intervals, "
+                f"got {turns!r}"
+            )
+        explicit = opt.intervals(turns, "turns", g.shape[0])
+        if not explicit:
+            raise CalibrationError("turns is empty: give at least one (start, end) interval")
+    if explicit is not None:
+        if off is None:
+            iv = _still_periods(g, tt, intervals, rest, win, kk, min_still)
+            if not iv:
+                raise CalibrationError(
+                    "no still period to take the gyro offset from: pass offset= (the mean "
+                    "of a recording at rest, triaxcal.gyro_bias(rest).offset)"
+                )
+            off = gyro_bias(g, intervals=iv).offset
+        cum = integrate_rate(g - off, tt)
+        return [_turn(cum, a, b) for a, b in explicit if b - a >= 2]
+    iv = _still_periods(g, tt, intervals, rest, win, kk, min_still)
     if len(iv) < 2:
         raise CalibrationError(
             f"found {len(iv)} still period(s); rotations are measured between two still periods: "
-            "hold the sensor still before and after every rotation"
+            "hold the sensor still before and after every rotation (for a recording that turns "
+            "without pausing, pass turns=[(start, end)] and the offset from a recording at rest)"
         )
-    off = gyro_bias(g, intervals=iv).offset if offset is None else np.asarray(offset, float)
+    if off is None:
+        off = gyro_bias(g, intervals=iv).offset
     cum = integrate_rate(g - off, tt)
+    if turns == WHOLE:
+        a, b = max(iv[0][1] - 1, 0), min(iv[-1][0] + 1, g.shape[0])
+        return [_turn(cum, a, b)] if b - a >= 2 else []
     out = []
     for (_, e0), (s1, _) in zip(iv[:-1], iv[1:]):
         a, b = max(e0 - 1, 0), min(s1 + 1, g.shape[0])
         if b - a < 2:
             continue
-        integ = cum[b - 1] - cum[a]
-        ax = int(np.argmax(np.abs(integ)))
-        norm = float(np.linalg.norm(integ))
-        purity = abs(float(integ[ax])) / norm if norm > 0 else 0.0
-        out.append(Rotation(a, b, _ro(integ), ax, "ccw" if integ[ax] > 0 else "cw", purity))
+        out.append(_turn(cum, a, b))
     return out
 
 
@@ -290,12 +371,14 @@ def gyro_gains(
     rate_hz: float | None = None,
     offset: Any = None,
     intervals: Sequence[tuple[int, int]] | None = None,
+    turns: Sequence[tuple[int, int]] | str | None = None,
     rest_s: float = 3.0,
     min_fraction: float = 0.75,
     max_fraction: float = 1.25,
     min_purity: float = 0.9,
     require_both_directions: bool = False,
     nominal_counts_per_dps: float | None = None,
+    axes: str = "xyz",
 ) -> GyroGains:
     """Gyro gain per axis and direction by integrating rotations of a known angle (the seed).
 
@@ -316,6 +399,14 @@ def gyro_gains(
         Bias in counts; ``None``: the mean over the still periods.
     intervals : sequence of (start, end), optional
         Still periods; ``None``: detected from the gyro (the first ``rest_s`` s must be still).
+    turns : None, "whole" or sequence of (start, end)
+        Which samples are the rotations (see :func:`find_rotations`): ``None``, each gap
+        between still periods; ``"whole"``, everything between a rest at the start and a rest
+        at the end (continuous turns, e.g. two 360 deg turns in a row with
+        ``angle_deg=720``); or explicit sample intervals, each one turn of ``angle_deg``
+        (with ``offset`` from a recording at rest when this one never rests).
+    rest_s : float
+        Initial rest, s, from which the still detector learns the noise.
     min_fraction, max_fraction : float
         Rotations whose angle, at a nominal gain taken from the larger rotations, is below
         ``min_fraction * angle_deg`` or above ``max_fraction * angle_deg`` are rejected as
@@ -327,6 +418,9 @@ def gyro_gains(
     nominal_counts_per_dps : float, optional
         The datasheet gain (131 for an MPU-6050 at +-250 deg/s), used to judge which rotations
         are too small or too large; ``None``: taken from the larger rotations found.
+    axes : str
+        The axes this recording turns about and must calibrate (``"xyz"``, or e.g. ``"z"``
+        for a recording of turns about z only); gains of the other axes are NaN.
 
     Returns
     -------
@@ -337,23 +431,54 @@ def gyro_gains(
     CalibrationError
         No still periods, no usable rotation, or an axis (with ``require_both_directions``, a
         direction) without a rotation; the message lists the missing ones.
+
+    Examples
+    --------
+    Two turns of 360 deg about z without a pause, a rest before and after (100 Hz, a gain of
+    131 counts per deg/s):
+
+    >>> import numpy as np, triaxcal as tc
+    >>> u = np.linspace(0.0, 1.0, 601)  # 6 s at 100 Hz
+    >>> rate = np.zeros((1400, 3)); rate[400:1001, 2] = 120 * (1 - np.cos(2 * np.pi * u))
+    >>> noise = np.random.default_rng(0).normal(0.0, 0.05, rate.shape)  # deg/s
+    >>> counts = 131.0 * (rate + noise) + [12.0, -7.0, 3.0]
+    >>> res = tc.gyro_gains(counts, angle_deg=720, rate_hz=100, turns="whole", axes="z")
+    >>> res.gain_counts_per_dps.round(1).tolist(), [r.label for r in res.rotations]
+    ([nan, nan, 131.0], ['z ccw'])
     """
-    ang = float(angle_deg)
-    if not (np.isfinite(ang) and ang > 0):
-        raise CalibrationError(f"angle_deg must be > 0 (90 on a cube), got {angle_deg!r}")
+    ang = opt.number(angle_deg, "angle_deg", gt=0, hint="90 on a cube, 360 for a full turn")
     g = _as_rate(gyro)
     tt = _times(g.shape[0], t, rate_hz)
-    if intervals is None:
-        iv = detect_still(g, rate_hz=1.0 / float(np.median(np.diff(tt))), window_s=0.5,
-                          rest_s=rest_s, k=4.0, min_duration_s=0.5).intervals
+    rest = opt.number(rest_s, "rest_s", gt=0, hint="seconds of initial rest")
+    min_frac = opt.number(min_fraction, "min_fraction", ge=0, lt=1)
+    max_frac = opt.number(max_fraction, "max_fraction", gt=1)
+    min_pur = opt.number(min_purity, "min_purity", ge=0, le=1)
+    both = opt.flag(require_both_directions, "require_both_directions")
+    nominal = opt.optional_number(nominal_counts_per_dps, "nominal_counts_per_dps", gt=0,
+                                  hint="131 for an MPU-6050 at +-250 deg/s")
+    off = None if offset is None else opt.vector3(offset, "offset", hint="gyro bias")
+    if not (isinstance(axes, str) and axes and set(axes) <= set(AXES)
+            and len(set(axes)) == len(axes)):
+        raise CalibrationError(
+            f"axes must name the axes to calibrate, each once, from 'xyz' (e.g. 'xyz' or 'z'), "
+            f"got {axes!r}"
+        )
+    need = [AXES.index(c) for c in AXES if c in axes]
+    explicit = turns is not None and not isinstance(turns, str)
+    if intervals is not None:
+        iv = opt.intervals(intervals, "intervals", g.shape[0])
+    elif explicit and off is not None:
+        iv = []  # nothing to detect: the turns and the offset are given
     else:
-        iv = sorted((int(a), int(b)) for a, b in intervals)
-    off = gyro_bias(g, intervals=iv).offset if offset is None else _ro(offset)
-    rots = find_rotations(g, t=tt, offset=off, intervals=iv)
+        iv = detect_still(g, rate_hz=_mean_rate(tt), window_s=0.5, rest_s=rest, k=4.0,
+                          min_duration_s=0.5).intervals
+    if off is None and iv:
+        off = gyro_bias(g, intervals=iv).offset
+    rots = find_rotations(g, t=tt, offset=off, intervals=iv, turns=turns)
     rejected: list[Rejection] = []
     pure = []
     for r in rots:
-        if r.purity < min_purity:
+        if r.purity < min_pur:
             rejected.append(Rejection(r.start, r.end, NOT_ONE_AXIS,
                                       f"{r.purity:.2f} of the turn on {AXES[r.axis]}"))
         else:
@@ -365,22 +490,20 @@ def gyro_gains(
             f"axes by {ang:g} deg, holding it still before and after"
         )
     # nominal gain from the larger turns; smaller ones are partial or accidental moves
-    if nominal_counts_per_dps is None:
+    if nominal is None:
         ref = float(np.median(mags[mags >= 0.5 * mags.max()])) / ang
     else:
-        ref = float(nominal_counts_per_dps)
-        if not (np.isfinite(ref) and ref > 0):
-            raise CalibrationError(f"nominal_counts_per_dps must be > 0, got {ref!r}")
+        ref = nominal
     used = []
     for r, m in zip(pure, mags):
-        if m < min_fraction * ang * ref:
+        if m < min_frac * ang * ref:
             rejected.append(Rejection(r.start, r.end, TOO_SMALL,
                                       f"{m / ref:.3g} deg at the nominal gain, need "
-                                      f">= {min_fraction * ang:g}"))
-        elif m > max_fraction * ang * ref:
+                                      f">= {min_frac * ang:g}"))
+        elif m > max_frac * ang * ref:
             rejected.append(Rejection(r.start, r.end, TOO_LARGE,
                                       f"{m / ref:.3g} deg at the nominal gain, need "
-                                      f"<= {max_fraction * ang:g}"))
+                                      f"<= {max_frac * ang:g}"))
         else:
             used.append(r)
     gains: dict[tuple[int, str], list[float]] = {
@@ -390,23 +513,25 @@ def gyro_gains(
         gains[(r.axis, r.direction)].append(abs(float(r.integral[r.axis])) / ang)
     ccw = np.array([np.mean(gains[(a, "ccw")]) if gains[(a, "ccw")] else np.nan for a in range(3)])
     cw = np.array([np.mean(gains[(a, "cw")]) if gains[(a, "cw")] else np.nan for a in range(3)])
-    missing = tuple(f"{AXES[a]} {d}" for a in range(3) for d in ("ccw", "cw") if not gains[(a, d)])
-    no_axis = [AXES[a] for a in range(3) if np.isnan(ccw[a]) and np.isnan(cw[a])]
+    missing = tuple(f"{AXES[a]} {d}" for a in need for d in ("ccw", "cw") if not gains[(a, d)])
+    no_axis = [AXES[a] for a in need if np.isnan(ccw[a]) and np.isnan(cw[a])]
     if no_axis:
         why = ", ".join(f"{r.reason} at samples {r.start}-{r.end}" for r in rejected)
         raise CalibrationError(
             f"no rotation of about {ang:g} deg about {', '.join(no_axis)}: rotations are missing "
             f"for {', '.join(no_axis)} (used: {', '.join(r.label for r in used) or 'none'}; "
             f"rejected: {why or 'none'}); turn the sensor about each axis by {ang:g} deg, "
-            "both ways, holding it still before and after"
+            "both ways, holding it still before and after (turns without a pause: pass "
+            "turns='whole' or turns=[(start, end)]; a recording about one axis: axes='z')"
         )
-    if require_both_directions and missing:
+    if both and missing:
         raise CalibrationError(
             f"rotations missing: {', '.join(missing)}; turn the sensor about each axis by "
             f"{ang:g} deg clockwise and counterclockwise"
         )
     mean = np.where(np.isnan(ccw), cw, np.where(np.isnan(cw), ccw, 0.5 * (ccw + cw)))
     asym = (ccw - cw) / mean
+    assert off is not None  # find_rotations raised if there was no offset and no rest
     return GyroGains(
         offset=_ro(off),
         gain_ccw_counts_per_dps=_ro(ccw),
@@ -440,10 +565,11 @@ def turntable_plateaus(
     are dropped).
     """
     g = _as_rate(gyro)
-    thr = 0.01 * float(min_rate) if threshold is None else float(threshold)
+    low = opt.number(min_rate, "min_rate", gt=0, hint="the slowest plateau, gyro units")
+    thr = 0.01 * low if threshold is None else opt.number(threshold, "threshold", gt=0)
     det = detect_poses(g, window=window, threshold=thr, min_separation=0.0,
                        min_windows=min_windows, max_std=10 * thr)
-    keep = [p for p in det.poses if np.linalg.norm(p.mean[:3]) >= min_rate]
+    keep = [p for p in det.poses if np.linalg.norm(p.mean[:3]) >= low]
     if not keep:
         return np.zeros((0, 3)), np.zeros(0, dtype=int)
     return np.array([p.mean[:3] for p in keep]), np.array([p.n for p in keep])
@@ -510,20 +636,18 @@ def fit_turntable(
     -------
     TurntableFit
     """
-    if model not in ("full", "axis"):
-        raise CalibrationError(f"model must be 'full' or 'axis', got {model!r}")
-    if len(recordings) != len(rates) or len(rates) == 0:
+    opt.choice(model, "model", ("full", "axis"))
+    rr_list = opt.numbers_list(rates, "rates", min_len=0, gt=0, hint="the table's rate, rad/s")
+    if (isinstance(recordings, (str, bytes)) or len(recordings) != len(rr_list)
+            or not rr_list):
         raise CalibrationError("give one rate per recording (and at least one recording)")
-    off = np.asarray(offset, dtype=np.float64).reshape(-1)
-    if off.shape != (3,) or not np.isfinite(off).all():
-        raise CalibrationError(f"offset must be 3 finite numbers, got {offset!r}")
+    off = opt.vector3(offset, "offset", hint="gyro bias, in the readings' units")
+    win = opt.integer(window, "window", ge=1, hint="samples per averaging window")
+    frac = opt.number(min_fraction, "min_fraction", gt=0, le=1)
     us, which, counts = [], [], []
-    for i, (rec, rate) in enumerate(zip(recordings, rates)):
-        rate = float(rate)
-        if not (np.isfinite(rate) and rate > 0):
-            raise CalibrationError(f"rates[{i}] must be > 0, got {rate!r}")
+    for i, (rec, rate) in enumerate(zip(recordings, rr_list)):
         g = _as_rate(rec, name=f"recordings[{i}]") - off
-        means, _ = turntable_plateaus(g, min_rate=min_fraction * rate, window=window)
+        means, _ = turntable_plateaus(g, min_rate=frac * rate, window=win)
         if len(means) == 0:
             raise CalibrationError(
                 f"recordings[{i}]: no constant-rate plateau near {rate:g}; is the table turning, "

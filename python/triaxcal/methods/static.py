@@ -6,6 +6,21 @@ already in g). :class:`SixPosition` also reports the inverse (raw units per g), 
 min/max method measures directly. The Ferraris method (Ferraris et al. 1995, as in imucal)
 gives full 3x3 matrices: ``calibrated = (raw - offset) @ matrix.T``.
 
+Ferraris, and how imucal's names map onto ours (imucal ``FerrarisCalibration.compute`` and
+``FerrarisCalibrationInfo._calibrate_acc`` / ``_calibrate_gyr``, mad-lab-fau/imucal 2.6):
+
+* imucal calibrates ``acc_cal = inv(R_a) @ inv(K_a) @ (acc - b_a)``, so
+  ``accel.offset = b_a`` and ``accel.matrix = inv(R_a) @ inv(K_a) = inv(K_a @ R_a)``;
+  ``K_a @ R_a`` (raw units per unit of ``gravity``; column i = response to +1 along i) is
+  ``inv(accel.matrix)``, and ``K_a`` (diagonal) holds its row norms, ``accel_counts_per_g``
+  divided by ``gravity``.
+* ``gyr_cal = inv(R_g) @ inv(K_g) @ (gyr - b_g - K_ga @ acc_cal)`` in deg/s, so
+  ``gyro.offset = b_g``, ``g_sensitivity = K_ga`` and
+  ``gyro.matrix = inv(R_g) @ inv(K_g) * pi / 180`` (ours is in rad/s). imucal's
+  ``expected_angle`` is signed (-360 by default: a clockwise turn); ours is the size of the turn
+  and the sense is read from the data (``rotation_sign``), so imucal with
+  ``expected_angle = rotation_sign * angle_deg`` gives the same matrices.
+
 Tilt rig (tilt-rig-gravity-calibration.txt), with the algebra checked: a reading ``s`` taken
 with an axis tilted down by ``theta`` and ``s'`` tilted up by ``theta`` see ``+-sin(theta)`` g,
 so ``gain * (s - offset) = sin(theta)`` and ``gain * (s' - offset) = -sin(theta)``, giving
@@ -29,6 +44,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import _options as opt
+from .._validate import as_samples
 from ..errors import CalibrationError
 from .imu import TriadCalibration
 
@@ -53,17 +70,12 @@ def _ro(a: Any) -> np.ndarray:
 
 
 def _readings(x: Any, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x, dtype=np.float64)
-    except (ValueError, TypeError) as exc:
-        raise CalibrationError(f"{name} must be numbers, shape (3,) or (N, 3) ({exc})") from None
+    arr = np.asarray(x) if not isinstance(x, (str, bytes)) else np.asarray([x])
     if arr.ndim == 1:
         arr = arr[None]
-    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] == 0:
-        raise CalibrationError(f"{name} must have shape (3,) or (N, 3), got {np.shape(x)}")
-    if not np.isfinite(arr).all():
-        raise CalibrationError(f"{name} contains NaN or inf; repair or drop those readings")
-    return arr
+    if arr.ndim == 2 and arr.shape[0] == 0:
+        raise CalibrationError(f"{name} must have shape (3,) or (N, 3), got {arr.shape}")
+    return as_samples(arr, name, finite=True)
 
 
 # --- tilt rig -------------------------------------------------------------------------------
@@ -131,9 +143,13 @@ def tilt_rig(
     >>> rig.offset.round(6).tolist(), rig.gain.round(6).tolist()
     ([0.01, 0.02, 0.0], [1.0, 1.0, 1.0])
     """
-    ang = float(angle_deg)
-    if not (np.isfinite(ang) and 0 < ang < 90):
-        raise CalibrationError(f"angle_deg must be between 0 and 90 degrees, got {angle_deg!r}")
+    ang = opt.number(angle_deg, "angle_deg", gt=0, lt=90, hint="the rig's tilt in degrees")
+    z_off = opt.number(z_offset, "z_offset", hint="raw units")
+    if not isinstance(readings, Mapping):
+        raise CalibrationError(
+            f"readings must be a mapping of {', '.join(TILT_KEYS)} -> readings, got "
+            f"{type(readings).__name__}"
+        )
     missing = [k for k in TILT_KEYS if k not in readings]
     if missing:
         raise CalibrationError(
@@ -156,7 +172,7 @@ def tilt_rig(
             )
         offset[j] = (s[j] + s2[j]) / 2
         gain[j] = np.sin(th) / span
-        zmean = 0.5 * (s[2] + s2[2]) - z_offset
+        zmean = 0.5 * (s[2] + s2[2]) - z_off
         if zmean == 0:
             raise CalibrationError("the vertical axis reads zero: is z pointing up on the rig?")
         gz[j] = np.cos(th) / zmean
@@ -165,7 +181,7 @@ def tilt_rig(
         k = 1 - j
         horiz = np.hypot(span, abs(s[k] - s2[k]) / 2)
         implied[j] = np.degrees(np.arctan2(horiz, abs(zmean)))
-    offset[2] = z_offset
+    offset[2] = z_off
     gain[2] = gz.mean()
     return TiltRig(
         offset=_ro(offset),
@@ -233,9 +249,7 @@ def six_position(points: Any, *, gravity: float = 1.0) -> SixPosition:
     ([100.0, 100.0, 300.0], [16400.0, 16384.0, 16300.0])
     """
     p = _readings(points, "points")
-    grav = float(gravity)
-    if not (np.isfinite(grav) and grav > 0):
-        raise CalibrationError(f"gravity must be > 0, got {gravity!r}")
+    grav = opt.number(gravity, "gravity", gt=0, hint="1.0 for g, 9.80665 for m/s^2")
     if p.shape[0] < 6:
         raise CalibrationError(f"six_position needs the six faces, got {p.shape[0]} poses")
     hi, lo = p.max(axis=0), p.min(axis=0)
@@ -279,9 +293,10 @@ class FerrarisCalibration:
     g_sensitivity : ndarray (3, 3)
         Gyro counts per unit of calibrated acceleration (linear-acceleration sensitivity).
     accel_counts_per_g : ndarray (3,)
-        Row norms of ``inv(accel.matrix)`` times ``gravity``: raw units per g.
+        Row norms of ``inv(accel.matrix)`` times ``gravity``: raw units per g (imucal's
+        ``diag(K_a)`` times ``gravity``).
     gyro_counts_per_dps : ndarray (3,)
-        Row norms of ``inv(gyro.matrix)`` in raw units per deg/s.
+        Row norms of ``inv(gyro.matrix)`` in raw units per deg/s (imucal's ``diag(K_g)``).
     rotation_sign : ndarray (3,)
         The sense (+1 ccw, -1 cw) assumed for each 360 deg turn, chosen so that the diagonal
         of the gyro matrix is positive (the recordings do not say which way they turned).
@@ -321,12 +336,40 @@ def ferraris(
     gravity : float
         Local gravity in the units wanted for the accelerometer.
     angle_deg : float
-        Angle of each turn, degrees.
+        Size of each turn, degrees (> 0); the sense of turning is found from the data and
+        reported as :attr:`FerrarisCalibration.rotation_sign`.
 
     Returns
     -------
     FerrarisCalibration
+        Equal to imucal's ``FerrarisCalibration(grav=gravity, expected_angle=rotation_sign *
+        angle_deg)`` (see the module notes for the names). The accelerometer offset of each
+        axis comes from the two poses with that axis vertical (Ferraris eq. 20); the gyro
+        offset is the mean over all six static poses; the Earth's rotation is ignored.
+
+    Examples
+    --------
+    A simulated sensor: offset (10, -20, 30) counts, 2048 counts per g, 16.4 counts per deg/s.
+
+    >>> import numpy as np, triaxcal as tc
+    >>> g, n = 9.81, 200
+    >>> off, cpg, cpd = np.array([10.0, -20.0, 30.0]), 2048.0, 16.4
+    >>> still = lambda v: (np.tile(off + cpg * np.array(v), (n, 1)), np.zeros((n, 3)))
+    >>> spin = lambda i: (np.tile(off + cpg * np.eye(3)[i], (n, 1)),
+    ...                   np.tile(cpd * 360 / (n / 100) * np.eye(3)[i], (n, 1)))
+    >>> sec = {"x_p": still([1, 0, 0]), "x_a": still([-1, 0, 0]), "y_p": still([0, 1, 0]),
+    ...        "y_a": still([0, -1, 0]), "z_p": still([0, 0, 1]), "z_a": still([0, 0, -1]),
+    ...        "x_rot": spin(0), "y_rot": spin(1), "z_rot": spin(2)}
+    >>> fer = tc.ferraris(sec, rate_hz=100.0, gravity=g)
+    >>> fer.accel.offset.tolist(), fer.accel_counts_per_g.round(6).tolist()
+    ([10.0, -20.0, 30.0], [2048.0, 2048.0, 2048.0])
+    >>> fer.gyro_counts_per_dps.round(6).tolist(), fer.rotation_sign.tolist()
+    ([16.4, 16.4, 16.4], [1.0, 1.0, 1.0])
     """
+    if not isinstance(sections, Mapping):
+        raise CalibrationError(
+            f"sections must be a mapping of name -> (acc, gyro), got {type(sections).__name__}"
+        )
     missing = [k for k in FERRARIS_SECTIONS if k not in sections]
     if missing:
         poses = [k for k in missing if not k.endswith("_rot")]
@@ -339,12 +382,13 @@ def ferraris(
         raise CalibrationError(
             "; ".join(parts) + " (x_p = x axis up, x_a = x axis down, x_rot = a full turn about x)"
         )
-    rate = float(rate_hz)
-    if not (np.isfinite(rate) and rate > 0):
-        raise CalibrationError(f"rate_hz must be > 0, got {rate_hz!r}")
-    grav = float(gravity)
-    if not (np.isfinite(grav) and grav > 0):
-        raise CalibrationError(f"gravity must be > 0, got {gravity!r}")
+    rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
+    grav = opt.number(gravity, "gravity", gt=0, hint="9.81 for m/s^2, 1.0 for g")
+    ang = opt.number(angle_deg, "angle_deg", gt=0, hint="the size of each turn; the sense "
+                     "is read from the data")
+    for k in FERRARIS_SECTIONS:
+        if isinstance(sections[k], (str, bytes)) or len(sections[k]) != 2:
+            raise CalibrationError(f"sections[{k!r}] must be a pair (acc (N, 3), gyro (N, 3))")
     acc = {k: _readings(sections[k][0], f"{k} acc") for k in FERRARIS_SECTIONS}
     gyr = {k: _readings(sections[k][1], f"{k} gyro") for k in FERRARIS_SECTIONS}
     for k in FERRARIS_SECTIONS:
@@ -353,7 +397,13 @@ def ferraris(
     static = FERRARIS_SECTIONS[:6]
     up = np.column_stack([acc[f"{a}_p"].mean(axis=0) for a in AXES])
     down = np.column_stack([acc[f"{a}_a"].mean(axis=0) for a in AXES])
-    b_a = (up.sum(axis=1) + down.sum(axis=1)) / 6
+    # Offset of axis i from the two poses in which axis i is vertical (Ferraris eq. 20, imucal's
+    # ``b_a = diag(B_a)``). Not the mean over all six poses: in the four poses where axis i is
+    # horizontal it reads ``offset + g sin(tilt)``, and a hand-held pose is tilted by a degree
+    # or two, a first-order error that the up/down pair does not cancel when the two tilts
+    # differ (7.7 counts on imucal's annotated session); along the vertical axis the tilt
+    # enters as ``g cos(tilt)``, second order, and the up/down pair cancels the offset exactly.
+    b_a = np.diag(up + down) / 2
     a_mat = (up - down) / (2 * grav)  # raw per unit; column i = response to +1 unit along i
     if abs(np.linalg.det(a_mat)) < 1e-12 * np.abs(a_mat).max() ** 3:
         raise CalibrationError("the six static poses do not span three axes: check the labels")
@@ -364,9 +414,6 @@ def ferraris(
     g_down = np.column_stack([gyr[f"{a}_a"].mean(axis=0) for a in AXES])
     k_ga = (g_up - g_down) / (2 * grav)
     w = np.zeros((3, 3))
-    ang = float(angle_deg)
-    if not (np.isfinite(ang) and ang != 0):
-        raise CalibrationError(f"angle_deg must be a non-zero number, got {angle_deg!r}")
     for i, a in enumerate(AXES):
         cal_a = accel.apply(acc[f"{a}_rot"])
         cor = gyr[f"{a}_rot"] - b_g - cal_a @ k_ga.T

@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import _options as opt
+from .._validate import as_samples
 from ..errors import CalibrationError
 
 __all__ = ["TemperatureModel", "TemperatureRangeWarning", "fit_temperature"]
@@ -83,7 +85,7 @@ class TemperatureModel:
     n: int
 
     def _dt(self, temp_degC: Any, warn: bool = True) -> np.ndarray:
-        t = np.asarray(temp_degC, dtype=np.float64)
+        t = _temperatures(temp_degC)
         if not np.isfinite(t).all():
             raise CalibrationError("temperature contains NaN or inf")
         if warn and t.size and (t.min() < self.t_min_degC or t.max() > self.t_max_degC):
@@ -115,15 +117,30 @@ class TemperatureModel:
     def apply(self, raw: Any, temp_degC: Any) -> np.ndarray:
         """Calibrated readings ``matrix(T) @ (raw - offset(T))`` for raw (N, 3), T (N,) or
         a scalar. Warns with :class:`TemperatureRangeWarning` outside the fitted range."""
-        r = np.asarray(raw, dtype=np.float64)
-        if r.ndim != 2 or r.shape[1] != 3:
-            raise CalibrationError(f"raw must have shape (N, 3), got {r.shape}")
-        t = np.broadcast_to(np.asarray(temp_degC, dtype=np.float64), r.shape[:1])
+        r = as_samples(raw, "raw", finite=True)
+        t = _temperatures(temp_degC)
+        if t.ndim > 1 or (t.ndim == 1 and t.shape[0] != r.shape[0]):
+            raise CalibrationError(
+                f"temp_degC must be one temperature or one per reading ({r.shape[0]}), got "
+                f"shape {t.shape}"
+            )
+        t = np.broadcast_to(t, r.shape[:1])
         dt = self._dt(t)
         powers = dt[:, None] ** np.arange(self.degree + 1)
         off = powers @ self.offset_coef
         sens = np.tensordot(powers, self.sens_coef, axes=(-1, 0))  # (N, 3, 3)
         return np.linalg.solve(sens, (r - off)[..., None])[..., 0]
+
+
+def _temperatures(temp_degC: Any) -> np.ndarray:
+    """Temperatures (degC) as float64, refusing text, booleans and complex numbers."""
+    t = np.asarray(temp_degC) if not isinstance(temp_degC, (str, bytes)) else np.asarray(
+        [temp_degC])
+    if t.dtype.kind not in "iuf":
+        raise CalibrationError(
+            f"temp_degC must hold real numbers (degrees Celsius), got dtype {t.dtype}"
+        )
+    return t.astype(np.float64)
 
 
 def fit_temperature(
@@ -181,38 +198,41 @@ def fit_temperature(
         few distinct temperatures for the degree, or true values that do not excite every
         sensitivity term.
     """
-    r = np.asarray(raw, dtype=np.float64)
-    if r.ndim != 2 or r.shape[1] != 3:
-        raise CalibrationError(f"raw must have shape (N, 3), got {r.shape}")
-    t = np.asarray(temp_degC, dtype=np.float64).reshape(-1)
+    r = as_samples(raw, "raw", finite=False)
+    t = _temperatures(temp_degC).reshape(-1)
     if t.shape[0] != r.shape[0]:
         raise CalibrationError(f"temp_degC has {t.shape[0]} values for {r.shape[0]} readings")
     if not (np.isfinite(r).all() and np.isfinite(t).all()):
         raise CalibrationError("raw or temp_degC contains NaN or inf; drop those samples first")
-    if isinstance(degree, bool) or degree not in (1, 2, 3):
-        raise CalibrationError(f"degree must be 1, 2 or 3, got {degree!r}")
+    deg = opt.integer(degree, "degree", ge=1, le=3, hint="1 linear, 2, 3")
+    ref_given = opt.optional_number(reference_degC, "reference_degC",
+                                    hint="degrees Celsius, or None for the first reading")
+    min_range = opt.number(min_range_degC, "min_range_degC", ge=0, hint="degrees Celsius")
+    if gain is not None:
+        opt.choice(gain, "gain", ("none", "diag", "full"))
     if r.shape[0] == 0:
         raise CalibrationError("no readings: record while the sensor warms up or cools down")
     span = float(t.max() - t.min())
-    if span < min_range_degC:
+    if span < min_range:
         raise CalibrationError(
             f"temperature range of {span:.3g} degC (at {t.min():.2f} degC): a temperature model "
-            f"needs readings over a range of temperatures (at least {min_range_degC:g} degC); "
+            f"needs readings over a range of temperatures (at least {min_range:g} degC); "
             "record while the sensor warms up or cools down"
         )
     distinct = np.unique(t).size
-    if distinct <= degree:
+    if distinct <= deg:
         raise CalibrationError(
-            f"only {distinct} distinct temperatures, a degree-{degree} polynomial needs at least "
-            f"{degree + 1}"
+            f"only {distinct} distinct temperatures, a degree-{deg} polynomial needs at least "
+            f"{deg + 1}"
         )
+    degree = deg
     if gain is None:
         gain = "none" if truth is None else "diag"
     if gain not in ("none", "diag", "full"):
         raise CalibrationError(f"gain must be 'none', 'diag' or 'full', got {gain!r}")
     if gain != "none" and truth is None:
         raise CalibrationError(f"gain={gain!r} needs the true values: pass truth=(N, 3)")
-    t_ref = float(t[0]) if reference_degC is None else float(reference_degC)
+    t_ref = float(t[0]) if ref_given is None else ref_given
     dt = t - t_ref
     s = max(float(np.abs(dt).max()), 1e-12)  # scale dT for conditioning
     p = (dt / s)[:, None] ** np.arange(degree + 1)  # (N, d+1)
@@ -221,13 +241,15 @@ def fit_temperature(
     if truth is None:
         v = np.zeros_like(r)
     else:
-        v = np.asarray(truth, dtype=np.float64)
-        if v.shape != r.shape or not np.isfinite(v).all():
-            raise CalibrationError(f"truth must be finite with shape {r.shape}, got {v.shape}")
+        v = as_samples(truth, "truth", finite=True)
+        if v.shape != r.shape:
+            raise CalibrationError(f"truth must have the shape of raw {r.shape}, got {v.shape}")
     if gain == "none":
-        m = np.eye(3) if matrix is None else np.asarray(matrix, dtype=np.float64)
-        if m.shape != (3, 3) or not np.isfinite(m).all():
-            raise CalibrationError(f"matrix must be a finite (3, 3) array, got shape {m.shape}")
+        m = np.eye(3) if matrix is None else as_samples(matrix, "matrix", finite=True)
+        if m.shape != (3, 3):
+            raise CalibrationError(f"matrix must be a (3, 3) array, got shape {m.shape}")
+        if abs(np.linalg.det(m)) <= 1e-12 * np.abs(m).max() ** 3:
+            raise CalibrationError("matrix is singular: give an invertible (3, 3) matrix")
         sens0 = np.linalg.inv(m)
         target = r - v @ sens0.T
         coef, *_ = np.linalg.lstsq(p, target, rcond=None)  # (d+1, 3)

@@ -38,6 +38,7 @@ from __future__ import annotations
 from ..io.protocol import CHANNELS_7, CHANNELS_10
 from .device import MODE_BYTES, Faults, SentFrame, SimDevice
 from .imu import Recording, SimIMU
+from .noise import NoiseTruth, noise_chunks, simulate_noise
 from .scripts import Script, globe_script, rotation_script, six_face_script
 from .truth import (
     ACCEL_COUNTS_PER_G,
@@ -51,6 +52,7 @@ from .truth import (
     temp_c_from_raw,
     temp_raw_from_c,
 )
+from .wearable import FreeLivingSim, WearableTruth
 
 __all__ = [
     "ACCEL_COUNTS_PER_G",
@@ -60,7 +62,10 @@ __all__ = [
     "GYRO_COUNTS_PER_RAD_S",
     "MODE_BYTES",
     "MAG_COUNTS_PER_UT",
+    "NoiseTruth",
     "Faults",
+    "FreeLivingSim",
+    "WearableTruth",
     "Recording",
     "Script",
     "SensorTruth",
@@ -70,8 +75,10 @@ __all__ = [
     "Truth",
     "globe_script",
     "matrix_to_rotvec",
+    "noise_chunks",
     "rotation_script",
     "rotvec_to_matrix",
+    "simulate_noise",
     "six_face_script",
     "temp_c_from_raw",
     "temp_raw_from_c",

@@ -28,6 +28,9 @@ if TYPE_CHECKING:
 #: Mode bytes of the device commands (as ``firmware/src/protocol.c``): the streaming protocol
 #: each byte switches to.
 MODE_BYTES = {b"P": None, b"B": "binary", b"F": "framed", b"T": "text", b"R": "raw"}
+#: The identify command: the board answers ``ID:<serial number>\r\n`` (see
+#: :func:`triaxcal.io.multicapture.query_serial_number`).
+ID_BYTE = b"I"
 _MODE_OF = {None: "P", "binary": "B", "framed": "F", "text": "T", "raw": "R"}
 
 
@@ -89,7 +92,8 @@ class SimDevice:
     binary frame of
     the current sample (in any mode); ``P`` stops streaming (the boot default), ``B``
     streams legacy binary frames, ``F`` framed (COBS + CRC-16) frames, ``T`` text lines, ``R``
-    MotionCal ``Raw:`` lines; a 68-byte MotionCal calibration packet with a valid CRC is
+    MotionCal ``Raw:`` lines; ``I`` answers the board's serial number as one line
+    ``ID:<serial>\r\n``; a 68-byte MotionCal calibration packet with a valid CRC is
     answered with ``Cal1:``/``Cal2:`` lines (stored in :attr:`motioncal`).
 
     Parameters
@@ -109,7 +113,7 @@ class SimDevice:
         Mode at power-on (``"P"``, polled, like the firmware).
     loop : bool
         Start the script again at its end; otherwise hold the last pose and set
-        :attr:`finished` (streaming stops).
+        :attr:`finished` (streaming stops) once every frame of the script is in the pty.
     faults : Faults, optional
         Bytes to damage, for tests.
     temp_c : float or (start, end)
@@ -123,6 +127,9 @@ class SimDevice:
         does.
     seed : int
         Seed of the default IMU and of the noise.
+    serial : str or None
+        Serial number answered to ``I`` (default ``"SIM-<seed>"``); ``None``: the board does
+        not know the command and ignores it, as older firmware does.
 
     Examples
     --------
@@ -150,6 +157,7 @@ class SimDevice:
         wrong_baud: bool = False,
         link: Any = None,
         seed: int = 0,
+        serial: str | None = "",
     ) -> None:
         if channels not in (10, 7):
             raise CalibrationError(f"SimDevice channels must be 10 or 7, got {channels}")
@@ -169,6 +177,7 @@ class SimDevice:
         self.loop = bool(loop)
         self.faults = faults
         self.wrong_baud = bool(wrong_baud)
+        self.serial = f"SIM-{int(seed)}" if serial == "" else serial
         self.boot_mode = MODE_BYTES[mode.encode()]
         self.protocol: str | None = self.boot_mode
         self._frames = self.recording.frames(self.channels)
@@ -336,18 +345,18 @@ class SimDevice:
                 cur = self._sample()
                 if not self.loop and cur >= n:
                     cur = n - 1
-                    if self._next >= n:
-                        self.finished.set()
                 silent = time.monotonic() < self._silent_until
                 if self.protocol is not None and not silent:
                     while self._next <= cur and self._pending_bytes < 8192:
                         self._emit(self._next, self.protocol, polled=False)
                         self._next += 1
-                    if not self.loop and self._next >= n:
-                        self.finished.set()
                 if silent or self.protocol is None:
                     self._next = max(self._next, cur + 1)  # no burst of old samples later
                 self._flush()
+                if not self.loop and self._next >= n and not self._pending:
+                    # the script is over and every byte of it is in the pty: whatever the
+                    # host has not read yet is in its input buffer, not still to come
+                    self.finished.set()
             except OSError:
                 # unplugged under our feet (stop() or unplug() from another thread)
                 time.sleep(0.002)
@@ -387,6 +396,8 @@ class SimDevice:
         if c == b"!":
             cur = min(self._sample(), len(self._frames) - 1) if not self.loop else self._sample()
             self._emit(cur, "binary", polled=True)
+        elif c == ID_BYTE and self.serial is not None:
+            self._queue(f"ID:{self.serial}\r\n".encode("utf-8", "replace"), None)
         elif c in MODE_BYTES:
             new = MODE_BYTES[c]
             if new != self.protocol:

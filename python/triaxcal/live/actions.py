@@ -1,0 +1,291 @@
+"""The page's buttons, each the CLI command of the same name on the session being captured.
+
+* **Save calibration** = ``triaxcal fit SESSION --sensor accel --poses ... -o calibration.json
+  --new`` then ``triaxcal fit SESSION --sensor mag ... -o calibration.json``, into the live
+  options' ``out_dir``: the commands (:func:`fit_argv`) are run by the command line itself
+  (:func:`run_cli`), so every rule of ``fit`` applies (refusing an undetermined fit, keeping
+  the replaced calibration as ``previous``...).
+* **Export C header** = Save, then ``triaxcal export calibration.json --format c`` (or
+  ``c-fixed``) ``-o <prefix>_calibration.h`` (``<prefix>_calibration_fixed.h``).
+* **Send to board** = Save, then ``triaxcal send calibration.json``: the 68-byte MotionCal
+  packet goes out over the port being captured (it stays open), and the board's ``Cal1:``
+  and ``Cal2:`` echo must repeat every value. The echo lines arrive amid the stream, so the
+  decoder drops the frame they interrupt (it is counted like any damaged frame); polled binary
+  cannot carry them (the next request clears the input), so Send needs a streaming protocol.
+
+After a Reset, Save fits only the rows captured since: they are first copied, header and all,
+to ``<session>.after-reset-<k>.csv`` next to the session, which is then the file fitted (so
+``triaxcal fit`` on that file gives the same calibration).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import threading
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..errors import CalibrationError
+
+if TYPE_CHECKING:
+    from ..calibration import Calibration
+    from ..cli.fit import FitOutcome
+    from ..poses import PoseSettings
+    from .state import LiveState
+
+__all__ = ["export_header", "fit_argv", "fit_session", "pose_argv", "reset", "run_cli", "save",
+           "send"]
+
+_ACTION_LOCK = threading.Lock()
+
+
+def pose_argv(settings: PoseSettings) -> list[str]:
+    """The pose options (``--window``, ``--accel-threshold``...) that describe ``settings``,
+    those that differ from the defaults (the inverse of the CLI's ``settings_from_args``)."""
+    from ..cli._poses import default_settings
+
+    d = default_settings()
+    out: list[str] = []
+    if settings.window != d.window:
+        out += ["--window", str(settings.window)]
+    if settings.accel_threshold_g != d.accel_threshold_g:
+        out += ["--accel-threshold", repr(float(settings.accel_threshold_g))]
+    if settings.counts_per_g is not None:
+        out += ["--counts-per-g", repr(float(settings.counts_per_g))]
+    for name, use, thr in (("gyro", settings.use_gyro, settings.gyro_threshold),
+                           ("mag", settings.use_mag, settings.mag_threshold)):
+        text = "off" if not use else "auto" if thr is None else repr(float(thr))
+        if text != "auto":
+            out += [f"--{name}-threshold", text]
+    if settings.hold_windows != d.hold_windows:
+        out += ["--hold", "off" if settings.hold_windows is None else str(settings.hold_windows)]
+    if settings.holdoff_s != d.holdoff_s:
+        out += ["--holdoff", repr(float(settings.holdoff_s))]
+    if settings.rate_hz is not None:
+        out += ["--rate-hz", repr(float(settings.rate_hz))]
+    return out
+
+
+def fit_argv(state: LiveState, sensor: str, session: str, output: str, *, new: bool) -> list[str]:
+    """The ``triaxcal fit`` arguments (without ``triaxcal``) that fit ``sensor`` of
+    ``session`` with the live page's options."""
+    o = state.options
+    argv = ["fit", session, "--sensor", sensor]
+    if o.model != "auto":
+        argv += ["--model", o.model]
+    if o.sigma != 2.0:
+        argv += ["--sigma", repr(float(o.sigma))]
+    if o.rounds != 10:
+        argv += ["--rounds", str(o.rounds)]
+    if sensor == "accel":
+        argv += ["--poses", *pose_argv(state.detection), "--radius", o.accel_radius]
+    elif o.mag_radius is not None:
+        argv += ["--radius", o.mag_radius]
+    argv += ["-o", output]
+    if new:
+        argv.append("--new")
+    return argv
+
+
+def _session_to_fit(state: LiveState) -> Path:
+    """The session file, or after a Reset a copy of the rows captured since."""
+    skip = state.existing_rows + state.reset_row
+    if state.reset_row == 0:
+        return state.session
+    out = state.session.with_name(f"{state.session.stem}.after-reset-{state.resets}.csv")
+    with open(state.session, encoding="ascii", errors="replace") as src, \
+            open(out, "w", encoding="ascii", newline="") as dst:
+        dst.write(src.readline())
+        for i, line in enumerate(src):
+            if i >= skip:
+                dst.write(line if line.endswith("\n") else line + "\n")
+    return out
+
+
+def fit_session(state: LiveState, output: str | None = None) -> dict[str, FitOutcome]:
+    """Fit every sensor of the session as ``triaxcal fit`` does; ``{sensor: FitOutcome}``.
+
+    Raises :class:`CalibrationError` when no sensor could be fitted (the messages of each)."""
+    from ..cli import build_parser
+    from ..cli.fit import fit_file
+
+    if not state.session.exists():
+        raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")
+    data = str(_session_to_fit(state))
+    out = output or str(state.out_dir / "calibration.json")
+    parser = build_parser()
+    outcomes: dict[str, FitOutcome] = {}
+    errors: list[str] = []
+    for sensor in ("accel", "mag"):
+        if sensor not in state.cols:
+            continue
+        args = parser.parse_args(fit_argv(state, sensor, data, out, new=not outcomes))
+        try:
+            outcomes[sensor] = fit_file(args)
+        except CalibrationError as exc:
+            errors.append(f"{sensor}: {exc}")
+    if not outcomes:
+        raise CalibrationError("; ".join(errors) or "no sensor to fit in this session")
+    state.last_fit_errors = errors
+    return outcomes
+
+
+def run_cli(argv: list[str]) -> tuple[int, str, str]:
+    """Run ``triaxcal ARGV`` in this process: ``(exit code, stdout, stderr)``.
+
+    Standard output and error are redirected while it runs (process-wide: nothing else of a
+    live capture prints to them; the capture's status line holds its own stream)."""
+    from ..cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    return rc, out.getvalue(), err.getvalue()
+
+
+def _save(state: LiveState) -> tuple[Calibration, Path, str]:
+    """``triaxcal fit`` of each sensor into calibration.json; raises with its messages."""
+    from ..calibration import Calibration
+
+    path = state.out_dir / "calibration.json"
+    if not state.session.exists():
+        raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")
+    state.out_dir.mkdir(parents=True, exist_ok=True)
+    data = str(_session_to_fit(state))
+    lines: list[str] = []
+    failed: list[str] = []
+    written = False
+    for sensor in ("accel", "mag"):
+        if sensor not in state.cols:
+            continue
+        rc, out, err = run_cli(fit_argv(state, sensor, data, str(path), new=not written))
+        said = " ".join(line.strip() for line in (out + err).splitlines() if line.strip())
+        if rc == 0:
+            written = True
+            lines.append(said)
+        else:
+            failed.append(f"{sensor}: {said}")
+    if not written:
+        raise CalibrationError("nothing saved: " + "; ".join(failed))
+    msg = " ".join(lines) + ("" if not failed else " (not saved: " + "; ".join(failed) + ")")
+    return Calibration.load(path), path, msg
+
+
+class _NeedsOffsetsOnly(CalibrationError):
+    """Send refused because the packet would drop gains (the page then offers offsets only)."""
+
+
+def _run(state: LiveState, action: str, fn: Any) -> dict[str, Any]:
+    if not _ACTION_LOCK.acquire(timeout=0.1):
+        return {"action": action, "ok": False, "time": time.time(),
+                "message": "another action is still running: wait for it to finish"}
+    try:
+        try:
+            result = {"action": action, "ok": True, **fn()}
+        except CalibrationError as exc:
+            result = {"action": action, "ok": False, "message": str(exc)}
+            if isinstance(exc, _NeedsOffsetsOnly):
+                result["needs_offsets_only"] = True
+    finally:
+        _ACTION_LOCK.release()
+    result["time"] = time.time()
+    state.last_action = result
+    return result
+
+
+def save(state: LiveState) -> dict[str, Any]:
+    """Save calibration: ``triaxcal fit`` of every sensor into ``calibration.json``."""
+    def go() -> dict[str, Any]:
+        _, path, msg = _save(state)
+        return {"message": msg, "path": str(path)}
+
+    return _run(state, "save", go)
+
+
+def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
+    """Export C header: Save, then ``triaxcal export calibration.json --format FMT``."""
+    from ..export._cgen import _ident
+
+    if fmt not in ("c", "c-fixed"):
+        return {"action": "export", "ok": False, "message": f"unknown header format {fmt!r}: "
+                "use 'c' (float) or 'c-fixed' (fixed point)"}
+
+    def go() -> dict[str, Any]:
+        cal, cal_path, msg = _save(state)
+        prefix = _ident(state.options.prefix)
+        name = f"{prefix}_calibration.h" if fmt == "c" else f"{prefix}_calibration_fixed.h"
+        out = state.out_dir / name
+        rc, said, err = run_cli(["export", str(cal_path), "--format", fmt, "--prefix", prefix,
+                                 "-o", str(out)])
+        if rc != 0:
+            raise CalibrationError(f"{msg}; but the export failed: {err.strip()}")
+        return {"message": f"{msg}; {said.strip()}", "path": str(out)}
+
+    return _run(state, f"export-{fmt}", go)
+
+
+def send(state: LiveState, *, offsets_only: bool = False) -> dict[str, Any]:
+    """Send to board: Save, then the MotionCal packet over the open port, with the echo check
+    of ``triaxcal send``. The packet carries the accelerometer's and gyroscope's offsets but
+    not their gains: as ``triaxcal send`` does, such a calibration is refused (the answer has
+    ``needs_offsets_only``) unless ``offsets_only`` (``--offsets-only``) accepts the loss."""
+    from ..export import echo_matches, motioncal_losses, motioncal_packet, parse_motioncal_echo
+
+    def go() -> dict[str, Any]:
+        reader = state._reader
+        if reader is None or state.status in ("fitting", "finished"):
+            raise CalibrationError(
+                "the capture has ended, so the port is closed: send the saved calibration with "
+                "`triaxcal send calibration.json --port PORT`")
+        if getattr(reader, "polled", False):
+            raise CalibrationError(
+                "polled binary cannot carry the board's echo while capturing: stop the capture "
+                "(Ctrl-C), then `triaxcal send calibration.json --port PORT`")
+        cal, cal_path, msg = _save(state)
+        losses = motioncal_losses(cal)
+        if losses and not offsets_only:
+            raise _NeedsOffsetsOnly(
+                f"{msg}; not sent: the MotionCal packet cannot carry " + "; ".join(losses)
+                + ". Send the offsets only (as `triaxcal send --offsets-only`), or export a C "
+                "header, which carries everything")
+        packet = motioncal_packet(cal, offsets_only=offsets_only)
+        state._echo = bytearray()
+        try:
+            reader.write(packet)
+            deadline = time.monotonic() + state.options.send_timeout_s
+            echo = None
+            while time.monotonic() < deadline:
+                echo = parse_motioncal_echo(bytes(state._echo))
+                if echo is not None:
+                    break
+                time.sleep(0.02)
+        finally:
+            seen = len(state._echo or b"")
+            state._echo = None
+        if echo is None:
+            raise CalibrationError(
+                f"{msg}; but no Cal1:/Cal2: echo from {state.port} within "
+                f"{state.options.send_timeout_s:g} s ({seen} bytes received meanwhile): check "
+                "that the board runs a sketch that accepts MotionCal packets")
+        bad = echo_matches(packet, *echo)
+        if bad:
+            raise CalibrationError(
+                f"{msg}; but the board echoed different values: " + "; ".join(bad[:5])
+                + " -- the packet may have been garbled; send it again")
+        cal1, cal2 = echo
+        lost = ("" if not losses else " -- not in the packet: " + "; ".join(losses))
+        return {"message": f"{msg}; sent {len(packet)}-byte MotionCal packet to {state.port}; "
+                           f"the board confirmed it{lost} (Cal1: "
+                           + ", ".join(f"{v:.4f}" for v in cal1) + "; Cal2: "
+                           + ", ".join(f"{v:.4f}" for v in cal2) + ")",
+                "path": str(cal_path)}
+
+    return _run(state, "send", go)
+
+
+def reset(state: LiveState) -> dict[str, Any]:
+    """Reset: forget the live poses, buffer and fits (the session file keeps every row)."""
+    return _run(state, "reset", lambda: {k: v for k, v in state.reset().items()
+                                         if k not in ("action", "ok")})

@@ -1,0 +1,652 @@
+//! Overlapping Allan deviation of rate samples, streamed chunk by chunk.
+//!
+//! Noise model (IEEE Std 952 / 1554): a gyroscope (or accelerometer) at rest reports its rate
+//! `y_k` (deg/s, rad/s, m/s², counts...) every `τ0 = 1 / rate` seconds. With the phase
+//! (integrated rate, in samples × unit) `x_0 = 0`, `x_k = Σ_{j<k} y_j`, the overlapping Allan
+//! variance at cluster size `m` (averaging time `τ = m τ0`) is
+//!
+//! ```text
+//!     σ²(τ) = Σ_i (x_{i+2m} - 2 x_{i+m} + x_i)² / (2 m² n)
+//! ```
+//!
+//! over the `n` start indices `i = 0, d, 2d, ...` with `i + 2m ≤ N` (NIST SP 1065 eq. 11;
+//! allantools' `oadev` for `d = 1`, its `calc_adev_phase(.., stride=d)` in general). The
+//! deviation `σ` is in the unit of the samples.
+//!
+//! Streaming: samples arrive in chunks of any size and are not kept. The phase is accumulated
+//! in double-double arithmetic (a running sum and the exact sum of its rounding errors), so a
+//! constant bias or a 10⁸-sample log loses no digits. Each stride `d` (a "level") keeps a ring
+//! of the last phases at multiples of `d`, just long enough for its longest cluster:
+//!
+//! * clusters of up to `exact_up_to` samples use every start (`d = 1`): exactly the classic
+//!   fully overlapping estimator;
+//! * a longer cluster `m` uses the power-of-two stride `d` that leaves between
+//!   [`DECIMATED_STARTS`] and twice that many starts per cluster (`m` is rounded to a multiple
+//!   of `d`). The estimator is then unbiased and statistically as good as the fully
+//!   overlapping one (starts closer than `m / 2048` give nearly identical terms), while the
+//!   memory no longer grows with the cluster.
+//!
+//! Memory is fixed when the accumulator is made (a few MB per axis for clusters up to 2⁴⁰
+//! samples) and independent of the number of samples; the work per sample is one
+//! double-double addition plus a few operations per exact cluster size.
+
+use crate::error::{CalError, Result};
+
+/// Rows of a chunk processed together (phases are computed for a batch, then every cluster
+/// reads them as contiguous slices, which vectorises).
+const BATCH: usize = 4096;
+
+/// Terms summed side by side in the inner loop (two AVX2 registers).
+const LANES: usize = 8;
+
+/// Fewest starts per cluster for clusters longer than the exact range (see module docs).
+pub const DECIMATED_STARTS: u64 = 2048;
+
+/// Largest ring (phase entries per axis and level) an exact computation may ask for: 2²⁸
+/// entries are 4 GiB per axis. Longer exact clusters must use `exact_up_to`.
+const MAX_RING: u64 = 1 << 28;
+
+/// One cluster size as computed: `m` samples, starts every `stride` samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cluster {
+    /// Cluster size in samples (`τ = m / rate`).
+    pub m: u64,
+    /// Distance in samples between the starts of consecutive terms (1: fully overlapping).
+    pub stride: u64,
+}
+
+/// The cluster sizes actually computed for the requested `ms`: sorted, deduplicated, with
+/// sizes above `exact_up_to` rounded to a multiple of their power-of-two stride (see the
+/// module documentation). `None` computes every size exactly.
+///
+/// ```
+/// use triaxcal::allan::{plan, Cluster};
+/// let p = plan(&[1, 4, 4, 100_000], Some(65_536)).unwrap();
+/// assert_eq!(p[0], Cluster { m: 1, stride: 1 });
+/// assert_eq!(p[2], Cluster { m: 100_000, stride: 32 });
+/// ```
+pub fn plan(ms: &[u64], exact_up_to: Option<u64>) -> Result<Vec<Cluster>> {
+    let mut out = Vec::with_capacity(ms.len());
+    for &m in ms {
+        if m == 0 {
+            return Err(CalError::InvalidArgument(
+                "cluster sizes must be at least 1 sample (tau >= 1 / rate_hz)".into(),
+            ));
+        }
+        let exact = match exact_up_to {
+            None => true,
+            Some(e) => m <= e || m < 2 * DECIMATED_STARTS,
+        };
+        if exact {
+            out.push(Cluster { m, stride: 1 });
+            continue;
+        }
+        let mut shift = 63 - (m / DECIMATED_STARTS).leading_zeros();
+        loop {
+            let d = 1u64 << shift;
+            let mp = (m + d / 2) / d;
+            if mp >= 2 * DECIMATED_STARTS {
+                shift += 1;
+                continue;
+            }
+            out.push(Cluster {
+                m: mp * d,
+                stride: d,
+            });
+            break;
+        }
+    }
+    out.sort_by_key(|c| (c.m, c.stride));
+    out.dedup_by_key(|c| c.m);
+    Ok(out)
+}
+
+/// Rings of one stride for one axis.
+#[derive(Debug, Clone)]
+struct Ring {
+    hi: Vec<f64>,
+    lo: Vec<f64>,
+}
+
+/// A stride and the clusters computed with it.
+#[derive(Debug, Clone)]
+struct Level {
+    stride: u64,
+    cap: usize,
+    /// Entries appended so far (the phase at index `k` is entry `k / stride`).
+    count: u64,
+    /// (cluster index, cluster size in entries of this level).
+    clusters: Vec<(usize, usize)>,
+}
+
+/// Everything about one axis.
+#[derive(Debug, Clone)]
+struct Axis {
+    reference: f64,
+    hi: f64,
+    lo: f64,
+    rings: Vec<Ring>,
+    /// Per cluster: Σ terms² (Kahan sum and its compensation).
+    sum: Vec<f64>,
+    comp: Vec<f64>,
+    /// Phases of the current batch.
+    bhi: Vec<f64>,
+    blo: Vec<f64>,
+}
+
+/// The streaming accumulator: feed rows with [`Allan::push`], read with [`Allan::result`].
+///
+/// ```
+/// use triaxcal::allan::Allan;
+/// // one axis, white noise-like alternation +1, -1 at 100 Hz: the 1-sample deviation is 2/sqrt(2)
+/// let mut acc = Allan::new(100.0, 1, &[1, 2], Some(65_536)).unwrap();
+/// acc.push(&[1.0, -1.0, 1.0, -1.0, 1.0]).unwrap();
+/// acc.push(&[-1.0, 1.0]).unwrap();
+/// let r = acc.result();
+/// assert!((r.adev[0][0] - 2f64.sqrt()).abs() < 1e-15);
+/// assert_eq!(r.terms[0], 6);
+/// ```
+#[derive(Debug, Clone)]
+pub struct Allan {
+    rate_hz: f64,
+    nax: usize,
+    clusters: Vec<Cluster>,
+    levels: Vec<Level>,
+    axes: Vec<Axis>,
+    n: u64,
+}
+
+/// The Allan deviation of everything pushed so far.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AllanResult {
+    /// The clusters, in increasing size.
+    pub clusters: Vec<Cluster>,
+    /// Averaging times `m / rate` in seconds.
+    pub taus: Vec<f64>,
+    /// `adev[c][a]`: deviation at cluster `c` for axis `a`, in the unit of the samples (NaN
+    /// where there is no term yet).
+    pub adev: Vec<Vec<f64>>,
+    /// Number of terms (starts) averaged per cluster.
+    pub terms: Vec<u64>,
+    /// Samples pushed.
+    pub n: u64,
+}
+
+impl Allan {
+    /// An accumulator for `axes` interleaved channels sampled at `rate_hz`, computing the
+    /// cluster sizes `ms` (in samples; see [`plan`] for `exact_up_to`).
+    pub fn new(rate_hz: f64, axes: usize, ms: &[u64], exact_up_to: Option<u64>) -> Result<Allan> {
+        crate::error::check_positive("rate_hz", rate_hz)?;
+        if axes == 0 || axes > 64 {
+            return Err(CalError::InvalidArgument(format!(
+                "axes must be between 1 and 64 channels, got {axes}"
+            )));
+        }
+        if ms.is_empty() {
+            return Err(CalError::InvalidArgument(
+                "no cluster sizes asked for: give at least one tau".into(),
+            ));
+        }
+        let clusters = plan(ms, exact_up_to)?;
+        let mut levels: Vec<Level> = Vec::new();
+        for (ci, c) in clusters.iter().enumerate() {
+            let mp = c.m / c.stride;
+            let li = match levels.iter().position(|l| l.stride == c.stride) {
+                Some(i) => i,
+                None => {
+                    levels.push(Level {
+                        stride: c.stride,
+                        cap: 0,
+                        count: 0,
+                        clusters: Vec::new(),
+                    });
+                    levels.len() - 1
+                }
+            };
+            levels[li].clusters.push((ci, mp as usize));
+        }
+        for l in levels.iter_mut() {
+            let mp_max = l.clusters.iter().map(|c| c.1 as u64).max().unwrap_or(0);
+            let cap = (BATCH as u64) / l.stride + 2 + 2 * mp_max + 1;
+            if cap > MAX_RING {
+                return Err(CalError::InvalidArgument(format!(
+                    "computing clusters of {} samples exactly needs {:.1} GB per axis: pass a \
+                     finite exact_up_to (e.g. 65536) so that long clusters are strided",
+                    mp_max,
+                    cap as f64 * 16.0 / 1e9
+                )));
+            }
+            l.cap = cap as usize;
+        }
+        let axis = Axis {
+            reference: f64::NAN,
+            hi: 0.0,
+            lo: 0.0,
+            // NaN-filled so that every page is touched now: the footprint stays flat later
+            rings: levels
+                .iter()
+                .map(|l| Ring {
+                    hi: vec![f64::NAN; l.cap],
+                    lo: vec![f64::NAN; l.cap],
+                })
+                .collect(),
+            sum: vec![0.0; clusters.len()],
+            comp: vec![0.0; clusters.len()],
+            bhi: vec![0.0; BATCH],
+            blo: vec![0.0; BATCH],
+        };
+        let mut acc = Allan {
+            rate_hz,
+            nax: axes,
+            clusters,
+            levels,
+            axes: vec![axis; axes],
+            n: 0,
+        };
+        // phase index 0 (x_0 = 0) belongs to every level
+        for a in acc.axes.iter_mut() {
+            for r in a.rings.iter_mut() {
+                r.hi[0] = 0.0;
+                r.lo[0] = 0.0;
+            }
+        }
+        for l in acc.levels.iter_mut() {
+            l.count = 1;
+        }
+        Ok(acc)
+    }
+
+    /// The clusters this accumulator computes.
+    pub fn clusters(&self) -> &[Cluster] {
+        &self.clusters
+    }
+
+    /// Number of interleaved channels.
+    pub fn result_axes(&self) -> usize {
+        self.nax
+    }
+
+    /// Samples pushed so far.
+    pub fn len(&self) -> u64 {
+        self.n
+    }
+
+    /// Whether nothing was pushed yet.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Bytes held by the rings and buffers (fixed at construction).
+    pub fn memory_bytes(&self) -> usize {
+        let per_axis: usize = self.levels.iter().map(|l| 16 * l.cap).sum::<usize>()
+            + 16 * BATCH
+            + 16 * self.clusters.len();
+        per_axis * self.nax
+    }
+
+    /// Adds rows of samples, row-major (`rows × axes` values, axes interleaved). Nothing is
+    /// added when a value is NaN or infinite (the error names the row, counted from the first
+    /// sample ever pushed).
+    pub fn push(&mut self, samples: &[f64]) -> Result<()> {
+        if !samples.len().is_multiple_of(self.nax) {
+            return Err(CalError::InvalidArgument(format!(
+                "got {} values, not a whole number of rows of {} axes",
+                samples.len(),
+                self.nax
+            )));
+        }
+        if let Some(i) = samples.iter().position(|v| !v.is_finite()) {
+            return Err(CalError::InvalidArgument(format!(
+                "sample {} (row {} of the whole stream, axis {}) is NaN or infinite: drop or \
+                 repair non-finite readings before computing the Allan deviation",
+                i / self.nax,
+                self.n + (i / self.nax) as u64,
+                i % self.nax
+            )));
+        }
+        let rows = samples.len() / self.nax;
+        if rows == 0 {
+            return Ok(());
+        }
+        let nax = self.nax;
+        let n0 = self.n;
+        let Allan { levels, axes, .. } = self;
+        // each axis is independent and advances its own copy of the level counters
+        let run_axis = |a: usize, ax: &mut Axis| {
+            if ax.reference.is_nan() {
+                ax.reference = samples[a];
+            }
+            let mut lv = levels.clone();
+            let mut start = 0usize;
+            while start < rows {
+                let b = BATCH.min(rows - start);
+                push_batch(ax, &mut lv, samples, nax, a, start, b, n0 + start as u64);
+                start += b;
+            }
+        };
+        if nax > 1 && rows >= 2 * BATCH {
+            use rayon::prelude::*;
+            axes.par_iter_mut()
+                .enumerate()
+                .for_each(|(a, ax)| run_axis(a, ax));
+        } else {
+            for (a, ax) in axes.iter_mut().enumerate() {
+                run_axis(a, ax);
+            }
+        }
+        advance_counts(levels, n0, rows as u64);
+        self.n += rows as u64;
+        Ok(())
+    }
+
+    /// The Allan deviation of everything pushed so far.
+    pub fn result(&self) -> AllanResult {
+        let nc = self.clusters.len();
+        let mut terms = vec![0u64; nc];
+        for l in &self.levels {
+            for &(ci, mp) in &l.clusters {
+                terms[ci] = l.count.saturating_sub(2 * mp as u64);
+            }
+        }
+        let adev = (0..nc)
+            .map(|ci| {
+                let m = self.clusters[ci].m as f64;
+                self.axes
+                    .iter()
+                    .map(|ax| {
+                        if terms[ci] == 0 {
+                            f64::NAN
+                        } else {
+                            ((ax.sum[ci] - ax.comp[ci]) / (2.0 * terms[ci] as f64)).sqrt() / m
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        AllanResult {
+            clusters: self.clusters.clone(),
+            taus: self
+                .clusters
+                .iter()
+                .map(|c| c.m as f64 / self.rate_hz)
+                .collect(),
+            adev,
+            terms,
+            n: self.n,
+        }
+    }
+}
+
+/// The level counts after `rows` more samples following `n0` (phase indices n0+1 ..= n0+rows).
+fn advance_counts(levels: &mut [Level], n0: u64, rows: u64) {
+    for l in levels.iter_mut() {
+        l.count = (n0 + rows) / l.stride + 1;
+    }
+}
+
+/// Phases of rows `start..start+b` of axis `a`, appended to every level, and the new terms.
+#[allow(clippy::too_many_arguments)]
+fn push_batch(
+    ax: &mut Axis,
+    levels: &mut [Level],
+    samples: &[f64],
+    nax: usize,
+    a: usize,
+    start: usize,
+    b: usize,
+    n_before: u64,
+) {
+    // double-double running phase: hi is the plain sum, lo the exact sum of its rounding errors
+    let (mut hi, mut lo) = (ax.hi, ax.lo);
+    let r = ax.reference;
+    for i in 0..b {
+        let y = samples[(start + i) * nax + a] - r;
+        let s = hi + y;
+        let bp = s - hi;
+        lo += (hi - (s - bp)) + (y - bp);
+        hi = s;
+        ax.bhi[i] = hi;
+        ax.blo[i] = lo;
+    }
+    ax.hi = hi;
+    ax.lo = lo;
+    // this batch holds phase indices k = n_before + 1 ..= n_before + b (buffer index k - n_before - 1)
+    for (li, l) in levels.iter_mut().enumerate() {
+        let d = l.stride;
+        let k_first = (n_before + 1).div_ceil(d) * d;
+        let k_last = n_before + b as u64;
+        if k_first > k_last {
+            continue;
+        }
+        let ring = &mut ax.rings[li];
+        let e_first = l.count;
+        let count = ((k_last - k_first) / d + 1) as usize;
+        let mut p = (e_first % l.cap as u64) as usize;
+        let mut idx = (k_first - n_before - 1) as usize;
+        for _ in 0..count {
+            ring.hi[p] = ax.bhi[idx];
+            ring.lo[p] = ax.blo[idx];
+            idx += d as usize;
+            p += 1;
+            if p == l.cap {
+                p = 0;
+            }
+        }
+        let e = e_first + count as u64;
+        let e_last = e - 1;
+        l.count = e;
+        for &(ci, mp) in &l.clusters {
+            let lo_e = e_first.max(2 * mp as u64);
+            if lo_e > e_last {
+                continue;
+            }
+            let s = sum_terms(ring, l.cap, mp, lo_e, e_last);
+            // Kahan: the total over a whole log keeps full precision (true sum = sum - comp)
+            let yv = s - ax.comp[ci];
+            let t = ax.sum[ci] + yv;
+            ax.comp[ci] = (t - ax.sum[ci]) - yv;
+            ax.sum[ci] = t;
+        }
+    }
+}
+
+/// Σ (x_e - 2 x_{e-mp} + x_{e-2mp})² for entries `e0 ..= e1` of a ring, in contiguous runs.
+fn sum_terms(ring: &Ring, cap: usize, mp: usize, e0: u64, e1: u64) -> f64 {
+    let mut total = 0.0;
+    let mut e = e0;
+    while e <= e1 {
+        let p2 = (e % cap as u64) as usize;
+        let p1 = ((e - mp as u64) % cap as u64) as usize;
+        let p0 = ((e - 2 * mp as u64) % cap as u64) as usize;
+        let len = ((e1 - e + 1) as usize)
+            .min(cap - p2)
+            .min(cap - p1)
+            .min(cap - p0);
+        total += run(
+            &ring.hi[p2..p2 + len],
+            &ring.hi[p1..p1 + len],
+            &ring.hi[p0..p0 + len],
+            &ring.lo[p2..p2 + len],
+            &ring.lo[p1..p1 + len],
+            &ring.lo[p0..p0 + len],
+        );
+        e += len as u64;
+    }
+    total
+}
+
+/// One contiguous run of terms (dispatches to the AVX2 build where the CPU has it).
+#[inline]
+fn run(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::has_avx2_fma() {
+        return crate::simd::avx2_call!(run_avx2(h2, h1, h0, l2, l1, l0));
+    }
+    run_impl(h2, h1, h0, l2, l1, l0)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn run_avx2(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
+    run_impl(h2, h1, h0, l2, l1, l0)
+}
+
+/// The second difference is formed as a difference of window sums, hi and lo parts apart, so
+/// that no digit is lost to the size of the phase; lanes of [`LANES`] terms vectorise.
+#[inline(always)]
+fn run_impl(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
+    let n = h2.len();
+    let (h1, h0, l2, l1, l0) = (&h1[..n], &h0[..n], &l2[..n], &l1[..n], &l0[..n]);
+    let mut acc = [0.0f64; LANES];
+    let full = n / LANES * LANES;
+    let lanes = h2[..full]
+        .chunks_exact(LANES)
+        .zip(h1[..full].chunks_exact(LANES))
+        .zip(h0[..full].chunks_exact(LANES))
+        .zip(l2[..full].chunks_exact(LANES))
+        .zip(l1[..full].chunks_exact(LANES))
+        .zip(l0[..full].chunks_exact(LANES));
+    for (((((a2, a1), a0), b2), b1), b0) in lanes {
+        for j in 0..LANES {
+            let t = ((a2[j] - a1[j]) - (a1[j] - a0[j])) + ((b2[j] - b1[j]) - (b1[j] - b0[j]));
+            acc[j] += t * t;
+        }
+    }
+    let mut tail = 0.0;
+    for i in full..n {
+        let t = ((h2[i] - h1[i]) - (h1[i] - h0[i])) + ((l2[i] - l1[i]) - (l1[i] - l0[i]));
+        tail += t * t;
+    }
+    acc.iter().sum::<f64>() + tail
+}
+
+/// Overlapping Allan deviation of samples held in memory (`rows × axes`, row-major): one
+/// accumulator, one push.
+pub fn oadev(
+    samples: &[f64],
+    axes: usize,
+    rate_hz: f64,
+    ms: &[u64],
+    exact_up_to: Option<u64>,
+) -> Result<AllanResult> {
+    let mut acc = Allan::new(rate_hz, axes, ms, exact_up_to)?;
+    acc.push(samples)?;
+    Ok(acc.result())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The textbook formula, straight from the phase (f64; fine for small inputs).
+    fn naive(y: &[f64], m: usize, stride: usize) -> (f64, usize) {
+        let mut x = vec![0.0];
+        for v in y {
+            x.push(x.last().unwrap() + v);
+        }
+        let n = y.len();
+        let mut s = 0.0;
+        let mut terms = 0;
+        let mut i = 0;
+        while i + 2 * m <= n {
+            let t = x[i + 2 * m] - 2.0 * x[i + m] + x[i];
+            s += t * t;
+            terms += 1;
+            i += stride;
+        }
+        ((s / (2.0 * terms as f64)).sqrt() / m as f64, terms)
+    }
+
+    fn lcg(n: usize, seed: u64) -> Vec<f64> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+            })
+            .collect()
+    }
+
+    #[test]
+    fn matches_the_formula_in_any_chunking() {
+        let y = lcg(20_000, 7);
+        let ms = [1u64, 2, 3, 7, 64, 1000, 4999];
+        for chunk in [1usize, 3, 4096, 5000, 20_000] {
+            let mut acc = Allan::new(10.0, 1, &ms, None).unwrap();
+            for c in y.chunks(chunk) {
+                acc.push(c).unwrap();
+            }
+            let r = acc.result();
+            for (ci, c) in r.clusters.iter().enumerate() {
+                let (want, terms) = naive(&y, c.m as usize, 1);
+                assert_eq!(r.terms[ci], terms as u64);
+                assert!(
+                    (r.adev[ci][0] - want).abs() <= 1e-12 * want,
+                    "chunk {chunk} m {}: {} vs {want}",
+                    c.m,
+                    r.adev[ci][0]
+                );
+                assert!((r.taus[ci] - c.m as f64 / 10.0).abs() < 1e-15);
+            }
+        }
+    }
+
+    #[test]
+    fn strided_levels_match_the_strided_formula() {
+        let y = lcg(300_000, 3);
+        let ms = [5000u64, 9000, 70_000];
+        let r = oadev(&y, 1, 1.0, &ms, Some(4096)).unwrap();
+        for (ci, c) in r.clusters.iter().enumerate() {
+            assert!(c.stride > 1 && c.m / c.stride >= DECIMATED_STARTS);
+            let (want, terms) = naive(&y, c.m as usize, c.stride as usize);
+            assert_eq!(r.terms[ci], terms as u64);
+            assert!((r.adev[ci][0] - want).abs() <= 1e-11 * want);
+        }
+    }
+
+    #[test]
+    fn axes_are_independent_and_offsets_do_not_matter() {
+        let a = lcg(10_000, 1);
+        let b = lcg(10_000, 2);
+        let rows: Vec<f64> = a
+            .iter()
+            .zip(&b)
+            .flat_map(|(x, y)| [*x + 1e6, *y * 3.0])
+            .collect();
+        let r = oadev(&rows, 2, 1.0, &[1, 10, 100], None).unwrap();
+        for (ci, c) in r.clusters.iter().enumerate() {
+            let wa = naive(&a, c.m as usize, 1).0;
+            let wb = naive(&b, c.m as usize, 1).0 * 3.0;
+            // a bias of 1e6 times the noise costs no digits (double-double phase)
+            assert!(
+                (r.adev[ci][0] - wa).abs() <= 1e-9 * wa,
+                "{} {wa}",
+                r.adev[ci][0]
+            );
+            assert!((r.adev[ci][1] - wb).abs() <= 1e-12 * wb);
+        }
+    }
+
+    #[test]
+    fn bad_input_is_an_error_and_leaves_the_state_alone() {
+        assert!(Allan::new(0.0, 1, &[1], None).is_err());
+        assert!(Allan::new(1.0, 0, &[1], None).is_err());
+        assert!(Allan::new(1.0, 1, &[0], None).is_err());
+        assert!(Allan::new(1.0, 1, &[], None).is_err());
+        assert!(Allan::new(1.0, 1, &[1 << 40], None).is_err());
+        let mut acc = Allan::new(1.0, 2, &[1], None).unwrap();
+        assert!(acc.push(&[1.0, 2.0, 3.0]).is_err());
+        let e = acc.push(&[1.0, 2.0, f64::NAN, 0.0]).unwrap_err();
+        assert!(e.to_string().contains("row 1"), "{e}");
+        assert!(acc.is_empty());
+    }
+
+    #[test]
+    fn memory_is_fixed_by_the_clusters_not_the_samples() {
+        let ms: Vec<u64> = (0..40).map(|k| 1u64 << k).collect();
+        let acc = Allan::new(1000.0, 3, &ms, Some(65_536)).unwrap();
+        assert!(acc.memory_bytes() < 40_000_000, "{}", acc.memory_bytes());
+    }
+}
