@@ -589,9 +589,6 @@ fn polish<const P: usize>(
             next[i] += delta[i];
         }
         let done = rho2 * f <= opts.tol || f <= 1e-28;
-        if std::env::var_os("TRIAXCAL_DEBUG").is_some() {
-            eprintln!("polish k={k} heavy={heavy} f={f:.3e} rho2={rho2:.2e} done={done}");
-        }
         if heavy && done {
             let jtr0 = SVector::<f64, P>::from_column_slice(&a.jtr0);
             let plain = (a.r0r0 + 2.0 * delta.dot(&jtr0) + dhd).max(0.0);
