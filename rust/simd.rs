@@ -285,6 +285,35 @@ mod avx2 {
     }
 }
 
+/// Whether this CPU has AVX2 and FMA (and `TRIAXCAL_PORTABLE` is not set): see
+/// [`Avx2::detect`]. For kernels that keep their own `#[target_feature]` twin and call it with
+/// [`avx2_call!`] instead of going through [`dispatch!`].
+#[inline(always)]
+pub fn has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        Avx2::detect().is_some()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Calls a `#[target_feature(enable = "avx2,fma")]` function. Use only after
+/// [`has_avx2_fma`] returned true.
+macro_rules! avx2_call {
+    ($call:expr) => {{
+        // SAFETY: the callee requires only AVX2 and FMA, and the caller checked
+        // `has_avx2_fma()` before this call.
+        #[allow(unsafe_code)]
+        let out = unsafe { $call };
+        out
+    }};
+}
+#[allow(unused_imports)]
+pub(crate) use avx2_call;
+
 /// Runs `$body` with `$s` bound to the best [`Simd`] of this CPU: [`Avx2`] inside a function
 /// compiled for AVX2 + FMA when the CPU has them, [`Portable`] otherwise. `$body` should call
 /// `#[inline(always)]` code generic over `S: Simd`, which is then compiled for each.
