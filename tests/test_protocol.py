@@ -645,5 +645,11 @@ def test_motioncal_packet_round_trip():
 def test_docstring_examples_run():
     import doctest
 
-    result = doctest.testmod(P, optionflags=doctest.ELLIPSIS)
-    assert result.attempted >= 14 and result.failed == 0
+    from triaxcal.io import framing
+
+    attempted = 0
+    for mod in (P, framing):
+        result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+        assert result.failed == 0
+        attempted += result.attempted
+    assert attempted >= 14
