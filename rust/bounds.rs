@@ -20,6 +20,13 @@ pub const MAX_UNCONVERGED_OFFSET_SE: f64 = 0.1;
 /// Offset standard errors above this fraction of the radius give a warning.
 pub const WARN_OFFSET_SE: f64 = 0.01;
 
+/// A residual RMS above this fraction of the radius gives a warning: the readings do not lie
+/// on the fitted surface at all (a sensor that hardly turned, so that the fit has wrapped a
+/// small sphere round the noise; mixed sensors; wrong columns). MEMS noise and unmodelled
+/// distortion stay at a few percent; a sphere fitted to strong soft iron (gains 1 : 1.5) at
+/// about 15 %.
+pub const WARN_RMS_FRACTION: f64 = 0.2;
+
 /// Coverage warnings start when the smallest eigenvalue of the direction scatter matrix
 /// `mean(d dᵀ)` falls below this (1/3 for readings spread evenly over the sphere, 0 for a ring).
 pub const WARN_MIN_SPREAD: f64 = 0.1;

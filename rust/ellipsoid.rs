@@ -1143,6 +1143,20 @@ fn finish<const P: usize>(
                  only part of the sphere; turn the sensor through more orientations"
             ));
         }
+        if !exact && rms > bounds::WARN_RMS_FRACTION * radius {
+            warnings.push(format!(
+                "the residuals are {:.0}% of the radius: the readings do not lie on {} at all (a \
+                 sensor that hardly turned, readings of more than one sensor, or the wrong \
+                 columns), so neither the offset nor the coverage means anything; turn the \
+                 sensor through many orientations",
+                100.0 * rms / radius,
+                if model.name() == "sphere" {
+                    "a sphere"
+                } else {
+                    "an ellipsoid"
+                },
+            ));
+        }
         // coverage of the sphere by the calibrated directions
         if !fin.coverage {
             let want = Want {

@@ -49,7 +49,12 @@ def test_fit_magnetometer_from_each_log(name, realdata, tmp_path, capsys):
     log = part.stats["log"]
     assert log["format"] in ("px4-ulog", "ardupilot-dataflash", "ros1-bag")
     if name != "sparkfun_razor.bag":  # that one turned more, but holds only directions
-        assert part.stats["coverage_pct"] < 50  # the shared measure's warning level
+        # the shared measure's warning level; or, when the fit wrapped a small sphere round
+        # a sensor that hardly turned (the coverage about that centre is meaningless), the
+        # report says that the readings do not lie on the surface and the radius is implausible
+        if part.stats["coverage_pct"] >= 50:
+            warned = " ".join(part.stats["warnings"])
+            assert "do not lie on" in warned and "not plausible" in warned
     if autopilot:
         assert part.stats["autopilot"]["autopilot"] == autopilot
         assert f"{autopilot} stored calibration of this mag" in text

@@ -413,3 +413,24 @@ print((after - before) * 1024, p.nbytes)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     extra, nbytes = (int(v) for v in out.stdout.split())
     assert extra < 0.25 * nbytes, (extra, nbytes)
+
+
+def test_a_sensor_that_never_turned_is_called_out():
+    """Readings of a sensor held still are a cloud of noise about one vector: the geometric fit
+    may wrap a small sphere round the cloud, with low residuals in absolute terms and every
+    direction "covered". The fit must say that the readings do not lie on a sphere; a real
+    turned sensor with MEMS noise and a sphere fitted to strong soft iron must not be told so."""
+    rng = np.random.default_rng(11)
+    still = np.array([43.0, -12.0, -6.0]) + rng.normal(scale=0.5, size=(300, 3))
+    fit = tc.fit_sphere(still)
+    rms = np.sqrt(np.mean((np.linalg.norm(still - fit.offset, axis=1) - fit.radius) ** 2))
+    assert fit.radius < 5.0 and rms > 0.2 * fit.radius  # the small sphere round the cloud
+    assert any("do not lie on a sphere" in w for w in fit.warnings), fit.warnings
+    u = rng.normal(size=(2000, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    turned = u * 48.0 + rng.normal(scale=0.5, size=u.shape)
+    assert not any("do not lie" in w for w in tc.fit_sphere(turned).warnings)
+    soft = (u * 48.0) @ np.diag([1.0, 1.5, 1.2]).T
+    sphere = tc.fit_sphere(soft)
+    assert not any("do not lie" in w for w in sphere.warnings), sphere.warnings
+    assert not any("do not lie" in w for w in tc.fit_ellipsoid(soft).warnings)

@@ -37,7 +37,7 @@ from ..io.akm import apply_asa, asa_factors
 from ..io.files import check_output
 from ..io.tables import SENSOR_COLUMNS, Table, pick_columns, read_table
 from ..parts import fold_asa
-from ..units import implausible_radius, unit_factor
+from ..units import UNITS, implausible_radius, unit_factor
 from ._field import add_field_options, alignment_for, expected_from_args, field_stats, yaw_part
 from ._poses import add_pose_options
 from ._source import (
@@ -294,6 +294,10 @@ def fit_file(args: argparse.Namespace, *, table: Table | None = None) -> FitOutc
     cov = coverage(part.apply(pts))  # of the session: every reading, outliers too
     stats["coverage_pct"] = cov.percent
     low = coverage_warning(cov, sensor)
+    if radius is None and UNITS.get(unit, ("",))[0] == sensor:  # a fitted radius in g, uT ...
+        odd = implausible_radius(sensor, part.radius, unit)
+        if odd:
+            notes.append(f"warning: fitted radius: {odd}")
     stats["warnings"] = [*stats.get("warnings", []), *([low] if low else []),
                          *(n[len("warning: "):] for n in notes if n.startswith("warning: "))]
     if getattr(args, "bootstrap", 0):
