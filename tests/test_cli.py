@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from triaxcal.cli import main
-from triaxcal.cli.fit import parse_radius, pick_columns, read_table
 from triaxcal.export import crc16_modbus, decode_motioncal, motioncal_packet
+from triaxcal.session.fit import parse_radius, pick_columns, read_table
 
 ICM = "icm20948-magneto"
 

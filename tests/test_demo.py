@@ -119,7 +119,7 @@ def test_capture_and_demo_count_the_84_poses_and_cover_the_sphere(demo):
     assert res["capture"]["poses_online"] == res["poses"] == 84
     assert res["capture"]["coverage_pct"] == res["coverage_pct"] == 100.0
     # the demo detected with nothing but the command line's defaults
-    from triaxcal.cli._poses import default_settings
+    from triaxcal.session.pose_options import default_settings
 
     d = res["pose_detection"]
     assert {k: v for k, v in d.items() if k != "counts_per_g"} == {

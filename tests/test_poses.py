@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import triaxcal as tc
 import triaxcal.poses as poses_mod
-from triaxcal.cli._poses import add_pose_options, settings_from_args, stored_settings
 from triaxcal.poses import HEAD_ROWS, PoseSettings, sensor_columns, session_poses
+from triaxcal.session.pose_options import add_pose_options, settings_from_args, stored_settings
 
 NAMES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp")
 

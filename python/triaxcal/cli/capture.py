@@ -12,7 +12,7 @@ from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
 from ..poses import POSE_N_COLUMN
-from ._poses import add_pose_options, settings_from_args
+from ..session.pose_options import add_pose_options, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 

@@ -33,8 +33,8 @@ from ..io.capture import CaptureResult, capture, channel_names, read_session
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
 from ..poses import PoseSettings, session_poses
+from ..session.pose_options import add_pose_options, default_settings, settings_from_args
 from ..sim import GYRO_COUNTS_PER_DPS, Script, SensorTruth, SimDevice, SimIMU, globe_script
-from ._poses import add_pose_options, default_settings, settings_from_args
 from .capture import add_live_options
 
 HELP = "capture from a simulated board, calibrate it, and compare with the truth"

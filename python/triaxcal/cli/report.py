@@ -24,11 +24,11 @@ from ..io.logs import is_log
 from ..io.tables import pick_columns, read_table
 from ..poses import pose_points
 from ..report import QualityReport, context_lines, plot_report, quality_report
+from ..session.fit import add_fit_options, fit_file
+from ..session.pose_options import apply_settings, stored_settings
+from ..session.source import load_source
 from ._calfile import file_sha256
 from ._method_parts import summary_only, summary_text, tilt_points
-from ._poses import apply_settings, stored_settings
-from ._source import load_source
-from .fit import add_fit_options, fit_file
 
 
 def register(subparsers: Any) -> None:

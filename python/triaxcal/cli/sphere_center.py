@@ -31,9 +31,9 @@ from ..fit import descend_center, fit_sphere, grid_center, sphere_error
 from ..io.tables import pick_columns, read_table
 from ..parts import part_from_center
 from ..poses import pose_points
+from ..session.fit import parse_radius
+from ..session.pose_options import add_pose_options, settings_from_args
 from ._calfile import add_output_options, file_sha256, save_part
-from ._poses import add_pose_options, settings_from_args
-from .fit import parse_radius
 
 HELP = "zero offset as the centre of a sphere of known radius (the seed's descent)"
 

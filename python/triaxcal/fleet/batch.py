@@ -1,7 +1,7 @@
 """Production line: fit every board's session, judge it against limits, write a record per board.
 
 Each board is fitted exactly as ``triaxcal fit SESSION.csv [options]`` fits one file (the same
-code: :func:`triaxcal.cli.fit.fit_table`), so a board's calibration is the same whether it was
+code: :func:`triaxcal.session.fit.fit_table`), so a board's calibration is the same whether it was
 fitted alone or in a batch of thousands. Then the board is judged against :class:`Limits`;
 the checks run in this order and every failed one is recorded (the first is the main reason):
 
@@ -257,8 +257,8 @@ def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float 
     slow drift and to the slow ends of moves), largest axis; the median over poses."""
     if not args.poses:
         return None
-    from ..cli._poses import settings_from_args
     from ..poses import sensor_columns, session_poses
+    from ..session.pose_options import settings_from_args
 
     accel = None if "accel" in sensor_columns(table.names) else cols
     det, _ = session_poses(table.names, table.data, settings_from_args(args), accel=accel)
@@ -285,8 +285,8 @@ def judge(
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
-    from ..cli.fit import fit_table
     from ..io.tables import pick_columns
+    from ..session.fit import fit_table
 
     source = str(table.path)
     fails: list[tuple[str, str]] = []
@@ -308,8 +308,8 @@ def judge(
         pts = raw
         if args.poses:
             try:
-                from ..cli._poses import settings_from_args
                 from ..poses import pose_points
+                from ..session.pose_options import settings_from_args
 
                 pts, _ = pose_points(table, cols, settings_from_args(args))
             except CalibrationError:
@@ -351,7 +351,7 @@ def fit_options(**overrides: Any) -> argparse.Namespace:
     >>> fit_options(model="full").model, fit_options().poses
     ('full', True)
     """
-    from ..cli.fit import add_fit_options
+    from ..session.fit import add_fit_options
 
     p = argparse.ArgumentParser(add_help=False)
     add_fit_options(p)

@@ -31,8 +31,8 @@ from ..errors import CalibrationError
 
 if TYPE_CHECKING:
     from ..calibration import Calibration
-    from ..cli.fit import FitOutcome
     from ..poses import PoseSettings
+    from ..session.fit import FitOutcome
     from .state import LiveState
 
 __all__ = ["export_header", "fit_argv", "fit_session", "pose_argv", "reset", "run_cli", "save",
@@ -44,7 +44,7 @@ _ACTION_LOCK = threading.Lock()
 def pose_argv(settings: PoseSettings) -> list[str]:
     """The pose options (``--window``, ``--accel-threshold``...) that describe ``settings``,
     those that differ from the defaults (the inverse of the CLI's ``settings_from_args``)."""
-    from ..cli._poses import default_settings
+    from ..session.pose_options import default_settings
 
     d = default_settings()
     out: list[str] = []
@@ -109,7 +109,7 @@ def fit_session(state: LiveState, output: str | None = None) -> dict[str, FitOut
 
     Raises :class:`CalibrationError` when no sensor could be fitted (the messages of each)."""
     from ..cli import build_parser
-    from ..cli.fit import fit_file
+    from ..session.fit import fit_file
 
     if not state.session.exists():
         raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")

@@ -77,8 +77,8 @@ class LiveOptions:
     send_timeout_s: float = 3.0
 
     def __post_init__(self) -> None:
-        from ..cli.fit import parse_radius
         from ..export._cgen import _ident
+        from ..session.fit import parse_radius
 
         if self.model not in (*MODELS, "auto"):
             raise CalibrationError(f"model must be one of {(*MODELS, 'auto')}, got {self.model!r}")

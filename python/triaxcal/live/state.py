@@ -107,7 +107,7 @@ class LiveState:
         self.protocol = protocol
         self.port = port
         raw = protocol == "raw"
-        from ..cli._poses import default_settings
+        from ..session.pose_options import default_settings
 
         self.detection = opts.detection if opts.detection is not None else default_settings()
         #: nominal accelerometer counts per g (for display until the data decide it)
@@ -121,7 +121,7 @@ class LiveState:
                 self.cols[sensor] = c
         if "accel" not in self.cols and len(names) >= 3:
             self.cols["accel"] = [0, 1, 2]
-        from ..cli.fit import parse_radius
+        from ..session.fit import parse_radius
 
         self.accel_radius, self.accel_unit = parse_radius(opts.accel_radius, "accel")
         if opts.mag_radius is not None:

@@ -71,7 +71,7 @@ def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
     the table half of :func:`load_source` (``triaxcal batch`` fits each board so)."""
     from ..io.tables import pick_columns
     from ..poses import pose_points
-    from ._poses import settings_from_args
+    from .pose_options import settings_from_args
 
     cols = pick_columns(table, getattr(args, "columns", None), sensor)
     pose_stats: dict[str, Any] = {}
@@ -132,7 +132,7 @@ def _log_pose_points(
     from dataclasses import replace
 
     from ..poses import SENSOR_NAMES, session_poses
-    from ._poses import settings_from_args
+    from .pose_options import settings_from_args
 
     acc = rec.stream("accel")
     per_g = _G.get(acc.unit)
