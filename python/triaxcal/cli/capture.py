@@ -12,7 +12,7 @@ from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
 from ..poses import POSE_N_COLUMN
-from ..session.pose_options import add_pose_options, settings_from_args
+from ..session.pose_options import add_pose_options, positive_int, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 
@@ -48,16 +48,6 @@ one status line per board; an unplugged board is waited for while the others go 
   triaxcal capture --port /dev/ttyUSB0 --port /dev/ttyUSB1 --protocol framed --poses 30 \
                    --out-dir sessions/
 """
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {v}")
-    return v
 
 
 def _request_byte(text: str) -> bytes:
@@ -103,12 +93,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--port", required=True, action="append",
                    help="serial port: /dev/ttyUSB0, /dev/ttyACM0, COM3; repeat it to capture "
                         "several boards at once (with --out-dir)")
-    p.add_argument("--baud", type=_positive_int, default=115200, help="baud rate (default 115200)")
+    p.add_argument("--baud", type=positive_int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--protocol", required=True, choices=PROTOCOLS,
                    help="wire protocol: binary (legacy, polled unless --stream), framed "
                         "(COBS + CRC-16, recommended), text (numbers per line), raw "
                         "(MotionCal Raw: lines)")
-    p.add_argument("--channels", type=_positive_int, default=None, metavar="K",
+    p.add_argument("--channels", type=positive_int, default=None, metavar="K",
                    help="values per record (default 10: ax ay az gx gy gz mx my mz temp; "
                         "7 for the AVR firmware, the default with --board-poses; raw is "
                         "always 9)")
@@ -122,9 +112,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="binary: the board streams by itself (mode byte B) instead of being "
                         "polled")
     stop = p.add_mutually_exclusive_group()
-    stop.add_argument("--samples", type=_positive_int, metavar="N",
+    stop.add_argument("--samples", type=positive_int, metavar="N",
                       help="stop after N records")
-    stop.add_argument("--poses", type=_positive_int, metavar="N",
+    stop.add_argument("--poses", type=positive_int, metavar="N",
                       help="stop after N still poses")
     p.add_argument("--seconds", type=float, default=None, metavar="S",
                    help="stop after S seconds")

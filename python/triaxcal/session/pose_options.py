@@ -33,7 +33,8 @@ def _nonnegative_float(text: str) -> float:
     return v
 
 
-def _window(text: str) -> int:
+def positive_int(text: str) -> int:
+    """An argparse type: a whole number >= 1."""
     try:
         v = int(text)
     except ValueError:
@@ -71,7 +72,7 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
         "A pose ends when any sensor says the board moved. The same options give the same poses "
         "in capture, fit --poses, report and demo.",
     )
-    g.add_argument("--window", type=_window, default=25, metavar="N",
+    g.add_argument("--window", type=positive_int, default=25, metavar="N",
                    help="samples per averaging window (default 25: 0.25 s at 100 Hz)")
     g.add_argument("--accel-threshold", type=_positive_float, default=0.07, metavar="G",
                    help="accelerometer: largest change of a window mean from the previous "
