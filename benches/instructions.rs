@@ -7,6 +7,7 @@
 //! instructions pass N         one accumulation pass with JᵀJ over N points (the unit of work)
 //! instructions polish N       one polishing pass (Jᵀr and the noise sums, no JᵀJ)
 //! instructions last N         the last polishing pass (JᵀJ, noise sums and coverage)
+//! instructions descend N      descend_center (radius 16384, the seed's steps) of N points
 //! instructions none N         only generate the N points (subtract from the others)
 //! ```
 //!
@@ -66,7 +67,7 @@ fn points(n: usize, seed: u64, noise: f64) -> Vec<[f64; 3]> {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: instructions {fit|batch|pass|none} N";
+    let usage = "usage: instructions {fit|batch|pass|polish|last|descend|none} N";
     let what = args.get(1).expect(usage).as_str();
     let n: usize = args.get(2).expect(usage).parse().expect(usage);
     let opts = FitOptions {
@@ -104,6 +105,16 @@ fn main() {
             let mean = [sp.mean.x, sp.mean.y, sp.mean.z];
             let s = triaxcal::ellipsoid::bench_one_pass(&pts, mean, sp.scale, kind as u8);
             println!("{what} {n}: {s:e}");
+        }
+        "descend" => {
+            // the data of benches/bench_fit.py's descent row: 0.2 % noise = 33 counts
+            let pts = points(n, 3, 33.0);
+            let opts = triaxcal::sphere::DescentOptions::default();
+            let d = triaxcal::sphere::descend_center(&pts, 16384.0, opts).unwrap();
+            println!(
+                "descend {n}: centre {:?} after {} neighbourhoods",
+                d.center, d.iterations
+            );
         }
         "none" => {
             let pts = points(n, 1, 164.0);

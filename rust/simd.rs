@@ -47,6 +47,8 @@ pub(crate) trait Simd: Copy {
     fn and(self, a: Self::V, b: Self::V) -> Self::V;
     /// Bitwise `!a & b`.
     fn andnot(self, a: Self::V, b: Self::V) -> Self::V;
+    /// The sign bits of the lanes, lane `l` in bit `l` (with a mask: which lanes are true).
+    fn sign_bits(self, a: Self::V) -> u32;
     /// `Σ` of the lanes, as `(l0 + l1) + (l2 + l3)`.
     #[inline(always)]
     fn sum(self, v: Self::V) -> f64 {
@@ -159,6 +161,11 @@ impl Simd for Portable {
     #[inline(always)]
     fn andnot(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
         lanes!(|a, b| f64::from_bits(!bits(a) & bits(b)))
+    }
+    #[inline(always)]
+    fn sign_bits(self, a: [f64; 4]) -> u32 {
+        let s = lanes!(|a| (bits(a) >> 63) as u32);
+        s[0] | (s[1] << 1) | (s[2] << 2) | (s[3] << 3)
     }
 }
 
@@ -281,6 +288,10 @@ mod avx2 {
         #[inline(always)]
         fn andnot(self, a: __m256d, b: __m256d) -> __m256d {
             unsafe { _mm256_andnot_pd(a, b) }
+        }
+        #[inline(always)]
+        fn sign_bits(self, a: __m256d) -> u32 {
+            unsafe { _mm256_movemask_pd(a) as u32 }
         }
     }
 }

@@ -256,25 +256,20 @@ fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26
     sums.totals(h2)
 }
 
-/// The 26 neighbours as 7 vectors of 4 lanes (the last two lanes are padding): `(i, j, k)`
-/// negated, and `i² + j² + k²`.
-const NEIGHBOUR_LANES: usize = 28;
+/// Points of [`neighbour_part`] examined between two passes over the points near the sphere.
+const BLOCK: usize = 256;
 
-fn neighbour_table() -> [[f64; NEIGHBOUR_LANES]; 4] {
-    let mut t = [[0.0; NEIGHBOUR_LANES]; 4];
-    for (m, d) in NEIGHBOURS.iter().enumerate() {
-        let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
-        t[0][m] = -i;
-        t[1][m] = -j;
-        t[2][m] = -k;
-        t[3][m] = i * i + j * j + k * k;
-    }
-    t
+/// The points near the sphere found in a block, as columns: `e0 = |q|² - R²` and
+/// `(a, b, c) = 2h q` (see [`NeighbourSums`]). Room for a block and the up to three points a
+/// block leaves over for the next.
+struct Near {
+    col: [[f64; BLOCK + 8]; 4],
+    n: usize,
 }
 
-/// [`NeighbourSums`] of `points` about the centre `c`: points far from the sphere (their error
-/// keeps its sign over the whole neighbourhood) add to the moments; the others are evaluated at
-/// all 26 neighbours at once, four neighbours per vector.
+/// [`NeighbourSums`] of `points` about the centre `c`, four points per vector: points far from
+/// the sphere (their error keeps its sign over the whole neighbourhood) add to the moments; the
+/// others are set aside and evaluated at all 26 neighbours after each block.
 #[inline(always)]
 fn neighbour_part<S: Simd>(
     s: S,
@@ -284,56 +279,130 @@ fn neighbour_part<S: Simd>(
     h: f64,
 ) -> NeighbourSums {
     let h2 = h * h;
-    let t = neighbour_table();
-    let vec = |row: &[f64; NEIGHBOUR_LANES], m: usize| {
-        s.vector([row[4 * m], row[4 * m + 1], row[4 * m + 2], row[4 * m + 3]])
+    let cv = arr3!(|k| s.splat(c[k]));
+    let (r2v, h2x2, low, one) = (
+        s.splat(r2),
+        s.splat(2.0 * h),
+        s.splat(-3.0 * h2),
+        s.splat(1.0),
+    );
+    // moments of the points of stable sign, signed: e0, a, b, c, count
+    let mut m = [s.zero(); 5];
+    let mut direct = [s.zero(); 26];
+    let mut near = Near {
+        col: [[0.0; BLOCK + 8]; 4],
+        n: 0,
     };
-    let ni: [S::V; 7] = std::array::from_fn(|m| vec(&t[0], m));
-    let nj: [S::V; 7] = std::array::from_fn(|m| vec(&t[1], m));
-    let nk: [S::V; 7] = std::array::from_fn(|m| vec(&t[2], m));
-    let hn: [S::V; 7] = std::array::from_fn(|m| s.mul(vec(&t[3], m), s.splat(h2)));
-    let mut direct = [s.zero(); 7];
-    let mut acc = NeighbourSums::zero();
-    for p in points {
-        let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-        let e0 = x * x + y * y + z * z - r2;
-        let (a, b, cc) = (2.0 * h * x, 2.0 * h * y, 2.0 * h * z);
-        let reach = a.abs() + b.abs() + cc.abs();
-        if e0 > reach {
-            // positive everywhere in the neighbourhood (h² n >= 0 only adds)
-            acc.m[0] += e0;
-            acc.m[1] += a;
-            acc.m[2] += b;
-            acc.m[3] += cc;
-            acc.m[4] += 1.0;
-        } else if e0 < -reach - 3.0 * h2 {
-            acc.m[0] -= e0;
-            acc.m[1] -= a;
-            acc.m[2] -= b;
-            acc.m[3] -= cc;
-            acc.m[4] -= 1.0;
-        } else {
-            // e(i, j, k) = e0 - i a - j b - k c + h² (i² + j² + k²)
-            let (va, vb, vc, ve) = (s.splat(a), s.splat(b), s.splat(cc), s.splat(e0));
-            for m in 0..7 {
-                let e = s.fma(
-                    ni[m],
-                    va,
-                    s.fma(nj[m], vb, s.fma(nk[m], vc, s.add(ve, hn[m]))),
-                );
-                direct[m] = s.add(direct[m], s.abs(e));
+    let (groups, rest) = points.as_chunks::<4>();
+    for block in groups.chunks(BLOCK / 4) {
+        for g in block {
+            let x = s.load_xyz(g);
+            let q = arr3!(|k| s.sub(x[k], cv[k]));
+            let e0 = s.sub(s.fma(q[2], q[2], s.fma(q[1], q[1], s.mul(q[0], q[0]))), r2v);
+            let v = [e0, s.mul(h2x2, q[0]), s.mul(h2x2, q[1]), s.mul(h2x2, q[2])];
+            let reach = s.add(s.add(s.abs(v[1]), s.abs(v[2])), s.abs(v[3]));
+            // positive everywhere in the neighbourhood (h² n >= 0 only adds), or negative
+            let pos = s.gt(e0, reach);
+            let neg = s.gt(s.sub(low, reach), e0);
+            for t in 0..4 {
+                m[t] = s.add(m[t], s.sub(s.and(pos, v[t]), s.and(neg, v[t])));
+            }
+            m[4] = s.add(m[4], s.sub(s.and(pos, one), s.and(neg, one)));
+            let unstable = !(s.sign_bits(pos) | s.sign_bits(neg)) & 0xF;
+            if unstable != 0 {
+                let cols = v.map(|x| s.to_array(x));
+                for l in 0..4 {
+                    for t in 0..4 {
+                        near.col[t][near.n] = cols[t][l];
+                    }
+                    near.n += ((unstable >> l) & 1) as usize;
+                }
             }
         }
+        near_sums(s, &mut near, h2, &mut direct);
     }
-    for m in 0..7 {
-        let d = s.to_array(direct[m]);
-        for l in 0..4 {
-            if 4 * m + l < 26 {
-                acc.direct[4 * m + l] = d[l];
+    let mut acc = NeighbourSums::zero();
+    for t in 0..5 {
+        acc.m[t] = s.sum(m[t]);
+    }
+    for t in 0..26 {
+        acc.direct[t] = s.sum(direct[t]);
+    }
+    // the points after the last group of four, and what the blocks left over: one at a time
+    let mut left: Vec<[f64; 4]> = (0..near.n)
+        .map(|i| [0, 1, 2, 3].map(|t| near.col[t][i]))
+        .collect();
+    for p in rest {
+        let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+        let e0 = x * x + y * y + z * z - r2;
+        let v = [e0, 2.0 * h * x, 2.0 * h * y, 2.0 * h * z];
+        let reach = v[1].abs() + v[2].abs() + v[3].abs();
+        if e0 > reach {
+            for t in 0..4 {
+                acc.m[t] += v[t];
             }
+            acc.m[4] += 1.0;
+        } else if e0 < -reach - 3.0 * h2 {
+            for t in 0..4 {
+                acc.m[t] -= v[t];
+            }
+            acc.m[4] -= 1.0;
+        } else {
+            left.push(v);
+        }
+    }
+    for v in left {
+        for (t, d) in NEIGHBOURS.iter().enumerate() {
+            let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
+            let e = v[0] - i * v[1] - j * v[2] - k * v[3] + h2 * (i * i + j * j + k * k);
+            acc.direct[t] += e.abs();
         }
     }
     acc
+}
+
+/// Adds the errors of the points set aside in `near`, at the 26 neighbours, to `direct`, four
+/// points at a time; the up to three left over move to the front of `near`.
+#[inline(always)]
+fn near_sums<S: Simd>(s: S, near: &mut Near, h2: f64, direct: &mut [S::V; 26]) {
+    let h2v = s.splat(h2);
+    let full = near.n / 4 * 4;
+    let col = |t: usize, i: usize| {
+        s.vector([
+            near.col[t][i],
+            near.col[t][i + 1],
+            near.col[t][i + 2],
+            near.col[t][i + 3],
+        ])
+    };
+    for i in (0..full).step_by(4) {
+        let (e0, a, b, cc) = (col(0, i), col(1, i), col(2, i), col(3, i));
+        // e(i, j, k) = e0 - i a - j b - k c + h² (i² + j² + k²), built one axis at a time
+        let e0h = s.add(e0, h2v);
+        let ex = [s.add(e0h, a), e0, s.sub(e0h, a)];
+        for (ii, &xi) in ex.iter().enumerate() {
+            let xh = s.add(xi, h2v);
+            let ey = [s.add(xh, b), xi, s.sub(xh, b)];
+            for (jj, &yj) in ey.iter().enumerate() {
+                let yh = s.add(yj, h2v);
+                let ez = [s.add(yh, cc), yj, s.sub(yh, cc)];
+                for (kk, &e) in ez.iter().enumerate() {
+                    let t = 9 * ii + 3 * jj + kk;
+                    if t == 13 {
+                        continue; // the centre
+                    }
+                    let t = if t > 13 { t - 1 } else { t };
+                    direct[t] = s.add(direct[t], s.abs(e));
+                }
+            }
+        }
+    }
+    for t in 0..4 {
+        for l in 0..near.n - full {
+            near.col[t][l] = near.col[t][full + l];
+        }
+    }
+    near.n -= full;
 }
 
 /// Variable-step 26-neighbour descent for the centre of a sphere of known `radius`.
@@ -698,21 +767,26 @@ mod tests {
 
     #[test]
     fn neighbour_sums_match_direct_evaluation() {
-        let pts = sphere_points([100.0, -50.0, 20.0], 1000.0, 20_000);
-        for (c, h) in [
-            ([0.0, 0.0, 0.0], 1000.0),
-            ([90.0, -45.0, 25.0], 10.0),
-            ([100.0, -50.0, 20.0], 0.01),
-        ] {
-            let fast = neighbour_sums(&pts, c, 1e6, h);
-            let slow = brute_neighbours(&pts, c, 1e6, h);
-            for t in 0..26 {
-                assert!(
-                    (fast[t] - slow[t]).abs() <= 1e-9 * slow[t].max(1.0),
-                    "{t}: {} vs {}",
-                    fast[t],
-                    slow[t]
-                );
+        // several blocks and rayon chunks; one block and a point after the groups of four;
+        // fewer points than a group
+        for n in [20_000, 1001, 7] {
+            let pts = sphere_points([100.0, -50.0, 20.0], 1000.0, n);
+            for (c, h) in [
+                ([0.0, 0.0, 0.0], 1000.0),
+                ([90.0, -45.0, 25.0], 10.0),
+                ([100.0, -50.0, 20.0], 0.01),
+                ([100.0, -50.0, 20.0], 3.0),
+            ] {
+                let fast = neighbour_sums(&pts, c, 1e6, h);
+                let slow = brute_neighbours(&pts, c, 1e6, h);
+                for t in 0..26 {
+                    assert!(
+                        (fast[t] - slow[t]).abs() <= 1e-9 * slow[t].max(1.0),
+                        "{n} points, {t}: {} vs {}",
+                        fast[t],
+                        slow[t]
+                    );
+                }
             }
         }
     }
