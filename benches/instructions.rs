@@ -40,12 +40,17 @@ impl Rng {
 /// per axis): the data of `benches/bench_fit.py` (1 % noise = 164 counts for the fits, 0.3 % =
 /// 49 counts for the batch).
 fn points(n: usize, seed: u64, noise: f64) -> Vec<[f64; 3]> {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ seed.wrapping_mul(0xd1b5_4a32_d192_ed03));
     let minv = [
         [15756.0, -165.0, 163.0],
         [-165.0, 16894.0, -251.0],
         [163.0, -251.0, 16388.0],
     ];
+    points_of(n, seed, noise, minv)
+}
+
+/// Readings `offset + minv u + noise` of unit vectors `u`.
+fn points_of(n: usize, seed: u64, noise: f64, minv: [[f64; 3]; 3]) -> Vec<[f64; 3]> {
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ seed.wrapping_mul(0xd1b5_4a32_d192_ed03));
     let off = [412.0, -230.5, 97.25];
     (0..n)
         .map(|_| {
@@ -107,8 +112,14 @@ fn main() {
             println!("{what} {n}: {s:e}");
         }
         "descend" => {
-            // the data of benches/bench_fit.py's descent row: 0.2 % noise = 33 counts
-            let pts = points(n, 3, 33.0);
+            // the data of benches/bench_fit.py's descent row: a sphere of 16384 counts, 0.2 %
+            // noise = 33 counts
+            let sphere = [
+                [16384.0, 0.0, 0.0],
+                [0.0, 16384.0, 0.0],
+                [0.0, 0.0, 16384.0],
+            ];
+            let pts = points_of(n, 3, 33.0, sphere);
             let opts = triaxcal::sphere::DescentOptions::default();
             let d = triaxcal::sphere::descend_center(&pts, 16384.0, opts).unwrap();
             println!(

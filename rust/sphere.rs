@@ -257,13 +257,13 @@ fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26
 }
 
 /// Points of [`neighbour_part`] examined between two passes over the points near the sphere.
-const BLOCK: usize = 256;
+const BLOCK: usize = 128;
 
-/// The points near the sphere found in a block, as columns: `e0 = |q|² - R²` and
-/// `(a, b, c) = 2h q` (see [`NeighbourSums`]). Room for a block and the up to three points a
-/// block leaves over for the next.
+/// The points near the sphere found in a block, one `[e0, a, b, c]` each: `e0 = |q|² - R²`
+/// and `(a, b, c) = 2h q` (see [`NeighbourSums`]). Room for a block and the up to three points
+/// a block leaves over for the next.
 struct Near {
-    col: [[f64; BLOCK + 8]; 4],
+    v: [[f64; 4]; BLOCK + 8],
     n: usize,
 }
 
@@ -290,7 +290,7 @@ fn neighbour_part<S: Simd>(
     let mut m = [s.zero(); 5];
     let mut direct = [s.zero(); 26];
     let mut near = Near {
-        col: [[0.0; BLOCK + 8]; 4],
+        v: [[0.0; 4]; BLOCK + 8],
         n: 0,
     };
     let (groups, rest) = points.as_chunks::<4>();
@@ -310,11 +310,10 @@ fn neighbour_part<S: Simd>(
             m[4] = s.add(m[4], s.sub(s.and(pos, one), s.and(neg, one)));
             let unstable = !(s.sign_bits(pos) | s.sign_bits(neg)) & 0xF;
             if unstable != 0 {
-                let cols = v.map(|x| s.to_array(x));
-                for l in 0..4 {
-                    for t in 0..4 {
-                        near.col[t][near.n] = cols[t][l];
-                    }
+                // one point per vector; each written, kept only if near the sphere
+                let rows = s.transpose(v);
+                for (l, r) in rows.iter().enumerate() {
+                    near.v[near.n] = s.to_array(*r);
                     near.n += ((unstable >> l) & 1) as usize;
                 }
             }
@@ -329,9 +328,7 @@ fn neighbour_part<S: Simd>(
         acc.direct[t] = s.sum(direct[t]);
     }
     // the points after the last group of four, and what the blocks left over: one at a time
-    let mut left: Vec<[f64; 4]> = (0..near.n)
-        .map(|i| [0, 1, 2, 3].map(|t| near.col[t][i]))
-        .collect();
+    let mut left: Vec<[f64; 4]> = near.v[..near.n].to_vec();
     for p in rest {
         let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
         let e0 = x * x + y * y + z * z - r2;
@@ -365,44 +362,57 @@ fn neighbour_part<S: Simd>(
 /// points at a time; the up to three left over move to the front of `near`.
 #[inline(always)]
 fn near_sums<S: Simd>(s: S, near: &mut Near, h2: f64, direct: &mut [S::V; 26]) {
-    let h2v = s.splat(h2);
     let full = near.n / 4 * 4;
-    let col = |t: usize, i: usize| {
-        s.vector([
-            near.col[t][i],
-            near.col[t][i + 1],
-            near.col[t][i + 2],
-            near.col[t][i + 3],
-        ])
-    };
-    for i in (0..full).step_by(4) {
-        let (e0, a, b, cc) = (col(0, i), col(1, i), col(2, i), col(3, i));
+    // one plane of neighbours (i = -1, 0, 1) at a time: its nine sums stay in registers
+    near_plane::<S, 0>(s, near, full, h2, direct);
+    near_plane::<S, 1>(s, near, full, h2, direct);
+    near_plane::<S, 2>(s, near, full, h2, direct);
+    near.v.copy_within(full..near.n, 0);
+    near.n -= full;
+}
+
+/// The sums of [`near_sums`] for the neighbours with `i = I - 1`.
+#[inline(always)]
+fn near_plane<S: Simd, const I: usize>(
+    s: S,
+    near: &Near,
+    full: usize,
+    h2: f64,
+    direct: &mut [S::V; 26],
+) {
+    let h2v = s.splat(h2);
+    // the plane's sums: index 3 (j + 1) + (k + 1), the centre's slot (4) unused
+    let mut acc = [s.zero(); 9];
+    let (groups, _) = near.v[..full].as_chunks::<4>();
+    for g in groups {
+        let [e0, a, b, cc] = s.transpose(g.map(|r| s.vector(r)));
         // e(i, j, k) = e0 - i a - j b - k c + h² (i² + j² + k²), built one axis at a time
-        let e0h = s.add(e0, h2v);
-        let ex = [s.add(e0h, a), e0, s.sub(e0h, a)];
-        for (ii, &xi) in ex.iter().enumerate() {
-            let xh = s.add(xi, h2v);
-            let ey = [s.add(xh, b), xi, s.sub(xh, b)];
-            for (jj, &yj) in ey.iter().enumerate() {
-                let yh = s.add(yj, h2v);
-                let ez = [s.add(yh, cc), yj, s.sub(yh, cc)];
-                for (kk, &e) in ez.iter().enumerate() {
-                    let t = 9 * ii + 3 * jj + kk;
-                    if t == 13 {
-                        continue; // the centre
-                    }
-                    let t = if t > 13 { t - 1 } else { t };
-                    direct[t] = s.add(direct[t], s.abs(e));
+        let xi = match I {
+            0 => s.add(s.add(e0, h2v), a),
+            1 => e0,
+            _ => s.sub(s.add(e0, h2v), a),
+        };
+        let xh = s.add(xi, h2v);
+        let ey = [s.add(xh, b), xi, s.sub(xh, b)];
+        for (jj, &yj) in ey.iter().enumerate() {
+            let yh = s.add(yj, h2v);
+            let ez = [s.add(yh, cc), yj, s.sub(yh, cc)];
+            for (kk, &e) in ez.iter().enumerate() {
+                if I == 1 && jj == 1 && kk == 1 {
+                    continue; // the centre
                 }
+                acc[3 * jj + kk] = s.add(acc[3 * jj + kk], s.abs(e));
             }
         }
     }
-    for t in 0..4 {
-        for l in 0..near.n - full {
-            near.col[t][l] = near.col[t][full + l];
+    for (m, a) in acc.iter().enumerate() {
+        if I == 1 && m == 4 {
+            continue;
         }
+        let t = 9 * I + m;
+        let t = if t > 13 { t - 1 } else { t };
+        direct[t] = s.add(direct[t], *a);
     }
-    near.n -= full;
 }
 
 /// Variable-step 26-neighbour descent for the centre of a sphere of known `radius`.
