@@ -15,8 +15,13 @@ use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{Matrix4, Vector3, Vector4};
 use rayon::prelude::*;
 
-/// Points per rayon task; below twice this the sums run on the calling thread.
+/// Points per rayon task.
 const CHUNK: usize = 4096;
+
+/// Below this many points the sums run on the calling thread: a sum over fewer takes a few
+/// tens of microseconds, less than waking rayon's workers and waiting for them (the descent
+/// sums once per neighbourhood, so a wake-up per neighbourhood would cost more than it saves).
+const PARALLEL_FROM: usize = 1 << 16;
 
 /// The result of a centre search.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,7 +133,7 @@ fn unscale_error(err: f64, e: i32, center: Option<[f64; 3]>) -> Result<f64> {
 }
 
 fn error_sum(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
-    if points.len() < 2 * CHUNK {
+    if points.len() < PARALLEL_FROM {
         error_sum_serial(points, c, r2)
     } else {
         points
@@ -245,7 +250,7 @@ impl NeighbourSums {
 fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26] {
     let h2 = h * h;
     let part = |chunk: &[[f64; 3]]| dispatch!(|simd| neighbour_part(simd, chunk, c, r2, h));
-    let sums = if points.len() < 2 * CHUNK {
+    let sums = if points.len() < PARALLEL_FROM {
         part(points)
     } else {
         points
@@ -779,7 +784,7 @@ mod tests {
     fn neighbour_sums_match_direct_evaluation() {
         // several blocks and rayon chunks; one block and a point after the groups of four;
         // fewer points than a group
-        for n in [20_000, 1001, 7] {
+        for n in [70_000, 1001, 7] {
             let pts = sphere_points([100.0, -50.0, 20.0], 1000.0, n);
             for (c, h) in [
                 ([0.0, 0.0, 0.0], 1000.0),
