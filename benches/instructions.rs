@@ -7,6 +7,7 @@
 //! instructions pass N         one accumulation pass with JᵀJ over N points (the unit of work)
 //! instructions polish N       one polishing pass (Jᵀr and the noise sums, no JᵀJ)
 //! instructions last N         the last polishing pass (JᵀJ, noise sums and coverage)
+//! instructions descend N      descend_center (radius 16384, the seed's steps) of N points
 //! instructions none N         only generate the N points (subtract from the others)
 //! ```
 //!
@@ -39,12 +40,17 @@ impl Rng {
 /// per axis): the data of `benches/bench_fit.py` (1 % noise = 164 counts for the fits, 0.3 % =
 /// 49 counts for the batch).
 fn points(n: usize, seed: u64, noise: f64) -> Vec<[f64; 3]> {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ seed.wrapping_mul(0xd1b5_4a32_d192_ed03));
     let minv = [
         [15756.0, -165.0, 163.0],
         [-165.0, 16894.0, -251.0],
         [163.0, -251.0, 16388.0],
     ];
+    points_of(n, seed, noise, minv)
+}
+
+/// Readings `offset + minv u + noise` of unit vectors `u`.
+fn points_of(n: usize, seed: u64, noise: f64, minv: [[f64; 3]; 3]) -> Vec<[f64; 3]> {
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ seed.wrapping_mul(0xd1b5_4a32_d192_ed03));
     let off = [412.0, -230.5, 97.25];
     (0..n)
         .map(|_| {
@@ -66,7 +72,7 @@ fn points(n: usize, seed: u64, noise: f64) -> Vec<[f64; 3]> {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: instructions {fit|batch|pass|none} N";
+    let usage = "usage: instructions {fit|batch|pass|polish|last|descend|none} N";
     let what = args.get(1).expect(usage).as_str();
     let n: usize = args.get(2).expect(usage).parse().expect(usage);
     let opts = FitOptions {
@@ -104,6 +110,22 @@ fn main() {
             let mean = [sp.mean.x, sp.mean.y, sp.mean.z];
             let s = triaxcal::ellipsoid::bench_one_pass(&pts, mean, sp.scale, kind as u8);
             println!("{what} {n}: {s:e}");
+        }
+        "descend" => {
+            // the data of benches/bench_fit.py's descent row: a sphere of 16384 counts, 0.2 %
+            // noise = 33 counts
+            let sphere = [
+                [16384.0, 0.0, 0.0],
+                [0.0, 16384.0, 0.0],
+                [0.0, 0.0, 16384.0],
+            ];
+            let pts = points_of(n, 3, 33.0, sphere);
+            let opts = triaxcal::sphere::DescentOptions::default();
+            let d = triaxcal::sphere::descend_center(&pts, 16384.0, opts).unwrap();
+            println!(
+                "descend {n}: centre {:?} after {} neighbourhoods",
+                d.center, d.iterations
+            );
         }
         "none" => {
             let pts = points(n, 1, 164.0);

@@ -47,6 +47,10 @@ pub(crate) trait Simd: Copy {
     fn and(self, a: Self::V, b: Self::V) -> Self::V;
     /// Bitwise `!a & b`.
     fn andnot(self, a: Self::V, b: Self::V) -> Self::V;
+    /// The sign bits of the lanes, lane `l` in bit `l` (with a mask: which lanes are true).
+    fn sign_bits(self, a: Self::V) -> u32;
+    /// The 4 x 4 transpose: lane `l` of output `k` is lane `k` of input `l`.
+    fn transpose(self, r: [Self::V; 4]) -> [Self::V; 4];
     /// `Σ` of the lanes, as `(l0 + l1) + (l2 + l3)`.
     #[inline(always)]
     fn sum(self, v: Self::V) -> f64 {
@@ -159,6 +163,15 @@ impl Simd for Portable {
     #[inline(always)]
     fn andnot(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
         lanes!(|a, b| f64::from_bits(!bits(a) & bits(b)))
+    }
+    #[inline(always)]
+    fn sign_bits(self, a: [f64; 4]) -> u32 {
+        let s = lanes!(|a| (bits(a) >> 63) as u32);
+        s[0] | (s[1] << 1) | (s[2] << 2) | (s[3] << 3)
+    }
+    #[inline(always)]
+    fn transpose(self, r: [[f64; 4]; 4]) -> [[f64; 4]; 4] {
+        std::array::from_fn(|k| [r[0][k], r[1][k], r[2][k], r[3][k]])
     }
 }
 
@@ -281,6 +294,25 @@ mod avx2 {
         #[inline(always)]
         fn andnot(self, a: __m256d, b: __m256d) -> __m256d {
             unsafe { _mm256_andnot_pd(a, b) }
+        }
+        #[inline(always)]
+        fn sign_bits(self, a: __m256d) -> u32 {
+            unsafe { _mm256_movemask_pd(a) as u32 }
+        }
+        #[inline(always)]
+        fn transpose(self, r: [__m256d; 4]) -> [__m256d; 4] {
+            unsafe {
+                let t0 = _mm256_unpacklo_pd(r[0], r[1]); // r0[0] r1[0] r0[2] r1[2]
+                let t1 = _mm256_unpackhi_pd(r[0], r[1]); // r0[1] r1[1] r0[3] r1[3]
+                let t2 = _mm256_unpacklo_pd(r[2], r[3]);
+                let t3 = _mm256_unpackhi_pd(r[2], r[3]);
+                [
+                    _mm256_permute2f128_pd::<0x20>(t0, t2),
+                    _mm256_permute2f128_pd::<0x20>(t1, t3),
+                    _mm256_permute2f128_pd::<0x31>(t0, t2),
+                    _mm256_permute2f128_pd::<0x31>(t1, t3),
+                ]
+            }
         }
     }
 }

@@ -15,8 +15,13 @@ use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{Matrix4, Vector3, Vector4};
 use rayon::prelude::*;
 
-/// Points per rayon task; below twice this the sums run on the calling thread.
+/// Points per rayon task.
 const CHUNK: usize = 4096;
+
+/// Below this many points the sums run on the calling thread: a sum over fewer takes a few
+/// tens of microseconds, less than waking rayon's workers and waiting for them (the descent
+/// sums once per neighbourhood, so a wake-up per neighbourhood would cost more than it saves).
+const PARALLEL_FROM: usize = 1 << 16;
 
 /// The result of a centre search.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,7 +133,7 @@ fn unscale_error(err: f64, e: i32, center: Option<[f64; 3]>) -> Result<f64> {
 }
 
 fn error_sum(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
-    if points.len() < 2 * CHUNK {
+    if points.len() < PARALLEL_FROM {
         error_sum_serial(points, c, r2)
     } else {
         points
@@ -245,7 +250,7 @@ impl NeighbourSums {
 fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26] {
     let h2 = h * h;
     let part = |chunk: &[[f64; 3]]| dispatch!(|simd| neighbour_part(simd, chunk, c, r2, h));
-    let sums = if points.len() < 2 * CHUNK {
+    let sums = if points.len() < PARALLEL_FROM {
         part(points)
     } else {
         points
@@ -256,25 +261,20 @@ fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) -> [f64; 26
     sums.totals(h2)
 }
 
-/// The 26 neighbours as 7 vectors of 4 lanes (the last two lanes are padding): `(i, j, k)`
-/// negated, and `i² + j² + k²`.
-const NEIGHBOUR_LANES: usize = 28;
+/// Points of [`neighbour_part`] examined between two passes over the points near the sphere.
+const BLOCK: usize = 128;
 
-fn neighbour_table() -> [[f64; NEIGHBOUR_LANES]; 4] {
-    let mut t = [[0.0; NEIGHBOUR_LANES]; 4];
-    for (m, d) in NEIGHBOURS.iter().enumerate() {
-        let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
-        t[0][m] = -i;
-        t[1][m] = -j;
-        t[2][m] = -k;
-        t[3][m] = i * i + j * j + k * k;
-    }
-    t
+/// The points near the sphere found in a block, one `[e0, a, b, c]` each: `e0 = |q|² - R²`
+/// and `(a, b, c) = 2h q` (see [`NeighbourSums`]). Room for a block and the up to three points
+/// a block leaves over for the next.
+struct Near {
+    v: [[f64; 4]; BLOCK + 8],
+    n: usize,
 }
 
-/// [`NeighbourSums`] of `points` about the centre `c`: points far from the sphere (their error
-/// keeps its sign over the whole neighbourhood) add to the moments; the others are evaluated at
-/// all 26 neighbours at once, four neighbours per vector.
+/// [`NeighbourSums`] of `points` about the centre `c`, four points per vector: points far from
+/// the sphere (their error keeps its sign over the whole neighbourhood) add to the moments; the
+/// others are set aside and evaluated at all 26 neighbours after each block.
 #[inline(always)]
 fn neighbour_part<S: Simd>(
     s: S,
@@ -284,56 +284,140 @@ fn neighbour_part<S: Simd>(
     h: f64,
 ) -> NeighbourSums {
     let h2 = h * h;
-    let t = neighbour_table();
-    let vec = |row: &[f64; NEIGHBOUR_LANES], m: usize| {
-        s.vector([row[4 * m], row[4 * m + 1], row[4 * m + 2], row[4 * m + 3]])
+    let cv = arr3!(|k| s.splat(c[k]));
+    let (r2v, h2x2, low, one) = (
+        s.splat(r2),
+        s.splat(2.0 * h),
+        s.splat(-3.0 * h2),
+        s.splat(1.0),
+    );
+    // moments of the points of stable sign, signed: e0, a, b, c, count
+    let mut m = [s.zero(); 5];
+    let mut direct = [s.zero(); 26];
+    let mut near = Near {
+        v: [[0.0; 4]; BLOCK + 8],
+        n: 0,
     };
-    let ni: [S::V; 7] = std::array::from_fn(|m| vec(&t[0], m));
-    let nj: [S::V; 7] = std::array::from_fn(|m| vec(&t[1], m));
-    let nk: [S::V; 7] = std::array::from_fn(|m| vec(&t[2], m));
-    let hn: [S::V; 7] = std::array::from_fn(|m| s.mul(vec(&t[3], m), s.splat(h2)));
-    let mut direct = [s.zero(); 7];
-    let mut acc = NeighbourSums::zero();
-    for p in points {
-        let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-        let e0 = x * x + y * y + z * z - r2;
-        let (a, b, cc) = (2.0 * h * x, 2.0 * h * y, 2.0 * h * z);
-        let reach = a.abs() + b.abs() + cc.abs();
-        if e0 > reach {
-            // positive everywhere in the neighbourhood (h² n >= 0 only adds)
-            acc.m[0] += e0;
-            acc.m[1] += a;
-            acc.m[2] += b;
-            acc.m[3] += cc;
-            acc.m[4] += 1.0;
-        } else if e0 < -reach - 3.0 * h2 {
-            acc.m[0] -= e0;
-            acc.m[1] -= a;
-            acc.m[2] -= b;
-            acc.m[3] -= cc;
-            acc.m[4] -= 1.0;
-        } else {
-            // e(i, j, k) = e0 - i a - j b - k c + h² (i² + j² + k²)
-            let (va, vb, vc, ve) = (s.splat(a), s.splat(b), s.splat(cc), s.splat(e0));
-            for m in 0..7 {
-                let e = s.fma(
-                    ni[m],
-                    va,
-                    s.fma(nj[m], vb, s.fma(nk[m], vc, s.add(ve, hn[m]))),
-                );
-                direct[m] = s.add(direct[m], s.abs(e));
+    let (groups, rest) = points.as_chunks::<4>();
+    for block in groups.chunks(BLOCK / 4) {
+        for g in block {
+            let x = s.load_xyz(g);
+            let q = arr3!(|k| s.sub(x[k], cv[k]));
+            let e0 = s.sub(s.fma(q[2], q[2], s.fma(q[1], q[1], s.mul(q[0], q[0]))), r2v);
+            let v = [e0, s.mul(h2x2, q[0]), s.mul(h2x2, q[1]), s.mul(h2x2, q[2])];
+            let reach = s.add(s.add(s.abs(v[1]), s.abs(v[2])), s.abs(v[3]));
+            // positive everywhere in the neighbourhood (h² n >= 0 only adds), or negative
+            let pos = s.gt(e0, reach);
+            let neg = s.gt(s.sub(low, reach), e0);
+            for t in 0..4 {
+                m[t] = s.add(m[t], s.sub(s.and(pos, v[t]), s.and(neg, v[t])));
+            }
+            m[4] = s.add(m[4], s.sub(s.and(pos, one), s.and(neg, one)));
+            let unstable = !(s.sign_bits(pos) | s.sign_bits(neg)) & 0xF;
+            if unstable != 0 {
+                // one point per vector; each written, kept only if near the sphere
+                let rows = s.transpose(v);
+                for (l, r) in rows.iter().enumerate() {
+                    near.v[near.n] = s.to_array(*r);
+                    near.n += ((unstable >> l) & 1) as usize;
+                }
             }
         }
+        near_sums(s, &mut near, h2, &mut direct);
     }
-    for m in 0..7 {
-        let d = s.to_array(direct[m]);
-        for l in 0..4 {
-            if 4 * m + l < 26 {
-                acc.direct[4 * m + l] = d[l];
+    let mut acc = NeighbourSums::zero();
+    for t in 0..5 {
+        acc.m[t] = s.sum(m[t]);
+    }
+    for t in 0..26 {
+        acc.direct[t] = s.sum(direct[t]);
+    }
+    // the points after the last group of four, and what the blocks left over: one at a time
+    let mut left: Vec<[f64; 4]> = near.v[..near.n].to_vec();
+    for p in rest {
+        let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+        let e0 = x * x + y * y + z * z - r2;
+        let v = [e0, 2.0 * h * x, 2.0 * h * y, 2.0 * h * z];
+        let reach = v[1].abs() + v[2].abs() + v[3].abs();
+        if e0 > reach {
+            for t in 0..4 {
+                acc.m[t] += v[t];
             }
+            acc.m[4] += 1.0;
+        } else if e0 < -reach - 3.0 * h2 {
+            for t in 0..4 {
+                acc.m[t] -= v[t];
+            }
+            acc.m[4] -= 1.0;
+        } else {
+            left.push(v);
+        }
+    }
+    for v in left {
+        for (t, d) in NEIGHBOURS.iter().enumerate() {
+            let (i, j, k) = (d[0] as f64, d[1] as f64, d[2] as f64);
+            let e = v[0] - i * v[1] - j * v[2] - k * v[3] + h2 * (i * i + j * j + k * k);
+            acc.direct[t] += e.abs();
         }
     }
     acc
+}
+
+/// Adds the errors of the points set aside in `near`, at the 26 neighbours, to `direct`, four
+/// points at a time; the up to three left over move to the front of `near`.
+#[inline(always)]
+fn near_sums<S: Simd>(s: S, near: &mut Near, h2: f64, direct: &mut [S::V; 26]) {
+    let full = near.n / 4 * 4;
+    // one plane of neighbours (i = -1, 0, 1) at a time: its nine sums stay in registers
+    near_plane::<S, 0>(s, near, full, h2, direct);
+    near_plane::<S, 1>(s, near, full, h2, direct);
+    near_plane::<S, 2>(s, near, full, h2, direct);
+    near.v.copy_within(full..near.n, 0);
+    near.n -= full;
+}
+
+/// The sums of [`near_sums`] for the neighbours with `i = I - 1`.
+#[inline(always)]
+fn near_plane<S: Simd, const I: usize>(
+    s: S,
+    near: &Near,
+    full: usize,
+    h2: f64,
+    direct: &mut [S::V; 26],
+) {
+    let h2v = s.splat(h2);
+    // the plane's sums: index 3 (j + 1) + (k + 1), the centre's slot (4) unused
+    let mut acc = [s.zero(); 9];
+    let (groups, _) = near.v[..full].as_chunks::<4>();
+    for g in groups {
+        let [e0, a, b, cc] = s.transpose(g.map(|r| s.vector(r)));
+        // e(i, j, k) = e0 - i a - j b - k c + h² (i² + j² + k²), built one axis at a time
+        let xi = match I {
+            0 => s.add(s.add(e0, h2v), a),
+            1 => e0,
+            _ => s.sub(s.add(e0, h2v), a),
+        };
+        let xh = s.add(xi, h2v);
+        let ey = [s.add(xh, b), xi, s.sub(xh, b)];
+        for (jj, &yj) in ey.iter().enumerate() {
+            let yh = s.add(yj, h2v);
+            let ez = [s.add(yh, cc), yj, s.sub(yh, cc)];
+            for (kk, &e) in ez.iter().enumerate() {
+                if I == 1 && jj == 1 && kk == 1 {
+                    continue; // the centre
+                }
+                acc[3 * jj + kk] = s.add(acc[3 * jj + kk], s.abs(e));
+            }
+        }
+    }
+    for (m, a) in acc.iter().enumerate() {
+        if I == 1 && m == 4 {
+            continue;
+        }
+        let t = 9 * I + m;
+        let t = if t > 13 { t - 1 } else { t };
+        direct[t] = s.add(direct[t], *a);
+    }
 }
 
 /// Variable-step 26-neighbour descent for the centre of a sphere of known `radius`.
@@ -698,21 +782,26 @@ mod tests {
 
     #[test]
     fn neighbour_sums_match_direct_evaluation() {
-        let pts = sphere_points([100.0, -50.0, 20.0], 1000.0, 20_000);
-        for (c, h) in [
-            ([0.0, 0.0, 0.0], 1000.0),
-            ([90.0, -45.0, 25.0], 10.0),
-            ([100.0, -50.0, 20.0], 0.01),
-        ] {
-            let fast = neighbour_sums(&pts, c, 1e6, h);
-            let slow = brute_neighbours(&pts, c, 1e6, h);
-            for t in 0..26 {
-                assert!(
-                    (fast[t] - slow[t]).abs() <= 1e-9 * slow[t].max(1.0),
-                    "{t}: {} vs {}",
-                    fast[t],
-                    slow[t]
-                );
+        // several blocks and rayon chunks; one block and a point after the groups of four;
+        // fewer points than a group
+        for n in [70_000, 1001, 7] {
+            let pts = sphere_points([100.0, -50.0, 20.0], 1000.0, n);
+            for (c, h) in [
+                ([0.0, 0.0, 0.0], 1000.0),
+                ([90.0, -45.0, 25.0], 10.0),
+                ([100.0, -50.0, 20.0], 0.01),
+                ([100.0, -50.0, 20.0], 3.0),
+            ] {
+                let fast = neighbour_sums(&pts, c, 1e6, h);
+                let slow = brute_neighbours(&pts, c, 1e6, h);
+                for t in 0..26 {
+                    assert!(
+                        (fast[t] - slow[t]).abs() <= 1e-9 * slow[t].max(1.0),
+                        "{n} points, {t}: {} vs {}",
+                        fast[t],
+                        slow[t]
+                    );
+                }
             }
         }
     }
