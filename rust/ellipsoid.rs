@@ -37,7 +37,7 @@
 //! Large inputs are solved first on a subsample of [`SUBSAMPLE_SIZE`] points, taken by a hash
 //! of each point's coordinates (so that neither the order nor a period of the data can make it
 //! unrepresentative; data with few distinct values fall back to one point at a fixed
-//! pseudo-random place in each of that many equal blocks, see [`subsample`]), then polished on all points by
+//! pseudo-random place in each of that many equal blocks), then polished on all points by
 //! Gauss-Newton steps that reuse the subsample's `JᵀJ` (scaled to the full size) and need only
 //! `Jᵀr` from each pass; the last pass accumulates the full `JᵀJ` for the standard errors, the
 //! residual statistics and the coverage of the sphere. The answer is the minimum over all
