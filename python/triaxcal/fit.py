@@ -11,6 +11,7 @@ soft-iron terms (``offdiag``).
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -32,16 +33,19 @@ from .errors import CalibrationError
 
 __all__ = [
     "MODELS",
+    "AutoFit",
     "BatchFit",
     "Descent",
     "EllipsoidFit",
     "LinearSphere",
     "descend_center",
+    "fit_auto",
     "fit_batch",
     "fit_ellipsoid",
     "fit_sphere",
     "fit_sphere_linear",
     "grid_center",
+    "information_criterion",
     "sphere_error",
 ]
 
@@ -115,7 +119,7 @@ class EllipsoidFit:
     warnings : tuple of str
         Plain-language warnings, e.g. poor coverage of the sphere, with what to do.
     model_reason : str or None
-        With ``model="auto"``: why this model was chosen (see :func:`triaxcal.select.fit_auto`).
+        With ``model="auto"``: why this model was chosen (see :func:`fit_auto`).
     fixed : tuple of str
         Parameters held at given values (``fixed=``) instead of fitted; their standard error is
         0.
@@ -264,8 +268,6 @@ def fit_ellipsoid(
     ([550.0, 299.4, -20.0], [1.002, 0.999, 1.0])
     """
     if model == "auto":
-        from .select import fit_auto  # select builds on this module
-
         auto = fit_auto(
             points, radius=radius, max_iter=max_iter, tol=tol, method=method, debias=debias,
             fixed=fixed,
@@ -519,6 +521,154 @@ def grid_center(points: Any, radius: float, *, lo: Any, hi: Any, step: float) ->
         step=as_real(step, "step", lo=0, lo_open=True),
     )
     return Descent._from_core(d)
+
+
+# ------------------------------------------------------------------------ model choice
+
+
+#: Free parameters of each model (offset 3 + scale terms).
+N_PARAMS = {"sphere": 4, "axis": 6, "full": 9}
+
+
+def information_criterion(fit: EllipsoidFit, points: Any, criterion: str = "bic") -> float:
+    """BIC (or AIC) of ``fit`` on ``points`` from the relative residuals ``|cal| / radius - 1``.
+
+    Lower is better. ``BIC = n ln(RSS / n) + k ln(n)``; ``AIC = n ln(RSS / n) + 2 k``.
+    """
+    as_choice(criterion, "criterion", ("bic", "aic"))
+    pts = as_points(points)
+    res = np.linalg.norm(fit.apply(pts), axis=1) / fit.radius - 1.0
+    n = len(res)
+    rss = max(float(res @ res), 1e-300)
+    k = N_PARAMS.get(fit.model, 9) - len(fit.fixed)  # free parameters only
+    if criterion == "bic":
+        pen = k * math.log(n)
+    elif criterion == "aic":
+        pen = 2.0 * k
+    else:
+        raise CalibrationError(f"unknown criterion {criterion!r}: use 'bic' or 'aic'")
+    return n * math.log(rss / n) + pen
+
+
+@dataclass(frozen=True)
+class AutoFit:
+    """The result of :func:`fit_auto`.
+
+    Attributes
+    ----------
+    fit : EllipsoidFit
+        The chosen model's fit.
+    model : str
+        The chosen model.
+    scores : dict
+        Criterion value per model tried (lower is better); models that failed are missing.
+    reason : str
+        One plain-language sentence saying why this model won.
+    errors : dict
+        Model -> error message for models that could not be fitted.
+    """
+
+    fit: EllipsoidFit
+    model: str
+    scores: dict[str, float]
+    reason: str
+    errors: dict[str, str] = field(default_factory=dict)
+
+
+def fit_auto(
+    points: Any,
+    *,
+    radius: float | None = None,
+    models: tuple[str, ...] = MODELS,
+    criterion: str = "bic",
+    **kwargs: Any,
+) -> AutoFit:
+    """Fit ``sphere``, ``axis`` and ``full`` and keep the best by an information criterion.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 3)
+        Raw readings.
+    radius : float, optional
+        Magnitude of calibrated readings (see :func:`~triaxcal.fit_ellipsoid`).
+    models : tuple of str
+        Models to compare.
+    criterion : {"bic", "aic"}
+        Bayesian (default; stricter with many points) or Akaike information criterion.
+    **kwargs
+        Passed to :func:`~triaxcal.fit_ellipsoid` (``max_iter``, ``tol``, ``method``...).
+
+    Returns
+    -------
+    AutoFit
+
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> from triaxcal.select import fit_auto
+    >>> rng = np.random.default_rng(1)
+    >>> u = rng.normal(size=(400, 3)); u /= np.linalg.norm(u, axis=1, keepdims=True)
+    >>> raw = u / [1.1, 0.9, 1.0] + 0.01 * rng.normal(size=(400, 3))
+    >>> fit_auto(raw, radius=1.0).model
+    'axis'
+    """
+    pts = as_points(points)
+    as_choice(criterion, "criterion", ("bic", "aic"))
+    if (
+        isinstance(models, str)
+        or not isinstance(models, (tuple, list))
+        or not models
+        or any(not isinstance(m, str) or m not in MODELS for m in models)
+    ):
+        raise CalibrationError(f"models must be chosen from {MODELS}, got {models!r}")
+    fits: dict[str, EllipsoidFit] = {}
+    scores: dict[str, float] = {}
+    errors: dict[str, str] = {}
+    fixed = kwargs.get("fixed") or {}
+    for m in models:
+        if any(name not in FIXABLE[m] for name in fixed):
+            # e.g. gain_z in the sphere model: that model cannot honour the request
+            errors[m] = f"cannot fix {', '.join(sorted(set(fixed) - set(FIXABLE[m])))}"
+            continue
+        try:
+            f = fit_ellipsoid(pts, model=m, radius=radius, **kwargs)
+        except CalibrationError as exc:
+            errors[m] = str(exc)
+            continue
+        fits[m] = f
+        scores[m] = information_criterion(f, pts, criterion)
+    if not fits:
+        raise CalibrationError(
+            "no model could be fitted: " + "; ".join(f"{m}: {e}" for m, e in errors.items())
+        )
+    best = min(scores, key=lambda m: scores[m])
+    reason = _reason(best, scores, fits, criterion, len(pts))
+    return AutoFit(fit=fits[best], model=best, scores=scores, reason=reason, errors=errors)
+
+
+def _reason(best: str, scores: dict[str, float], fits: dict[str, EllipsoidFit], crit: str,
+            n: int) -> str:
+    name = crit.upper()
+    others = [m for m in scores if m != best]
+    if not others:
+        return f"only {best!r} could be fitted"
+    parts = []
+    for m in others:
+        d = scores[m] - scores[best]
+        rel = fits[m].rms / fits[m].radius * 100
+        parts.append(f"{m!r} {name} +{d:.1f} (RMS {rel:.3g} %)")
+    simpler = [m for m in others if N_PARAMS[m] < N_PARAMS[best]]
+    richer = [m for m in others if N_PARAMS[m] > N_PARAMS[best]]
+    why = []
+    if simpler:
+        why.append(f"its extra terms lower the residuals by more than their price ln({n}) = "
+                   f"{math.log(n):.1f} each")
+    if richer:
+        why.append("the extra terms of " + " and ".join(repr(m) for m in richer)
+                   + " do not lower the residuals enough to pay for themselves")
+    rel_best = fits[best].rms / fits[best].radius * 100
+    return (f"chose {best!r} (RMS {rel_best:.3g} % of radius, lowest {name}): "
+            + "; ".join(why) + ". Others: " + ", ".join(parts) + ".")
 
 
 def _check_options(
