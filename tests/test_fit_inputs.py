@@ -15,7 +15,7 @@ from triaxcal.select import fit_auto, fit_robust, information_criterion
 
 OFFSET = np.array([412.0, -230.5, 97.25])  # counts
 MATRIX = np.array([[1.05, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]]) / 16384.0
-SUBSAMPLE_ABOVE = 60_000  # rust/ellipsoid.rs: larger inputs are solved on a subsample first
+SUBSAMPLE_ABOVE = 60_000  # rust/ellipsoid/mod.rs: larger inputs are solved on a subsample first
 
 
 def _close(a: tc.EllipsoidFit, b: tc.EllipsoidFit, *, offset_se: float, matrix_rel: float):

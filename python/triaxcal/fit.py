@@ -1,6 +1,6 @@
 """Sphere and ellipsoid fits: the Python face of the Rust core (``triaxcal._core``).
 
-Error model (see ``rust/ellipsoid.rs``): a raw reading ``p`` and the true field ``f`` of
+Error model (see ``rust/ellipsoid/mod.rs``): a raw reading ``p`` and the true field ``f`` of
 constant magnitude ``radius`` are related by ``f = matrix @ (p - offset)``, i.e. in numpy terms
 ``calibrated = (raw - offset) @ matrix.T``. ``offset`` is in raw units (counts, or whatever the
 points are in); ``matrix`` **multiplies** and carries calibrated units per raw unit (for example

@@ -1,0 +1,80 @@
+//! The subsample a large input is solved on first: it depends on the set of points, not on
+//! their order.
+
+use super::*;
+
+/// A subsample of about `size` points that depends only on the *set* of points, not on their
+/// order: a point is taken when a hash of its coordinates falls below `size / n` of the hash
+/// range. Heavily repeated data (few distinct values: a tiled pattern) would give a few values
+/// many times over; then one point is drawn at a fixed pseudo-random position inside each of
+/// `size` equal blocks instead (no period in the data can line up with that pick).
+pub(super) fn subsample(points: &[[f64; 3]], size: usize, parallel: bool) -> Vec<[f64; 3]> {
+    let n = points.len();
+    let cut = ((size as f64 / n as f64) * 18_446_744_073_709_551_616.0) as u64;
+    let part = |c: &[[f64; 3]]| -> Vec<[f64; 3]> {
+        c.iter().filter(|p| point_hash(p) < cut).copied().collect()
+    };
+    let picked: Vec<[f64; 3]> = if parallel && n > 4 * kernel::CHUNK {
+        points
+            .par_chunks(4 * kernel::CHUNK)
+            .map(part)
+            .reduce(Vec::new, |mut a, b| {
+                a.extend_from_slice(&b);
+                a
+            })
+    } else {
+        part(points)
+    };
+    if distinct_at_least(&picked, MIN_DISTINCT.min(size / 2)) && picked.len() >= size / 2 {
+        return picked;
+    }
+    let nb = size.min(n).max(1);
+    (0..nb)
+        .map(|b| {
+            let lo = b * n / nb;
+            let hi = (b + 1) * n / nb;
+            let r = splitmix64(b as u64 ^ 0x7472_6961_7863_616c) % (hi - lo) as u64;
+            points[lo + r as usize]
+        })
+        .collect()
+}
+
+/// A subsample by content needs at least this many distinct points (else it is drawn by
+/// position, see [`subsample`]).
+pub(super) const MIN_DISTINCT: usize = 2000;
+
+/// A hash of a point's bits (multiplicative hashing, twice: the high bits depend on all the
+/// bits of all three coordinates).
+#[inline(always)]
+pub(super) fn point_hash(p: &[f64; 3]) -> u64 {
+    let h = p[0].to_bits() ^ p[1].to_bits().rotate_left(21) ^ p[2].to_bits().rotate_left(42);
+    let h = h.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    (h ^ (h >> 32)).wrapping_mul(0xd6e8_feb8_6659_fd93)
+}
+
+/// Whether `points` hold at least `want` distinct values, estimated by linear counting over a
+/// 65,536-bit map of their hashes (exact enough for the few thousand this is asked about).
+pub(super) fn distinct_at_least(points: &[[f64; 3]], want: usize) -> bool {
+    const BITS: usize = 1 << 16;
+    let mut map = vec![0u64; BITS / 64];
+    for p in points {
+        let h = (point_hash(p) >> 16) as usize & (BITS - 1);
+        map[h / 64] |= 1 << (h % 64);
+    }
+    let empty = BITS - map.iter().map(|w| w.count_ones() as usize).sum::<usize>();
+    let estimate = if empty == 0 {
+        f64::INFINITY
+    } else {
+        -(BITS as f64) * (empty as f64 / BITS as f64).ln()
+    };
+    estimate >= want as f64
+}
+
+/// SplitMix64: a well-mixed 64-bit hash of `x`.
+#[inline(always)]
+pub(super) fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
