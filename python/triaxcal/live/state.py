@@ -571,7 +571,7 @@ class LiveState:
 
     def fit_commands(self) -> list[str]:
         """The ``triaxcal fit`` commands that Save runs (on the session as it is)."""
-        from .actions import fit_argv
+        from .fitting import fit_argv
 
         out = str(self.out_dir / "calibration.json")
         cmds = []
@@ -672,7 +672,7 @@ class LiveState:
     def finish(self, result: Any = None) -> None:
         """The capture ended: fit the saved session exactly as ``triaxcal fit`` does (the
         accelerometer with ``--poses``, the magnetometer on every row) and publish that."""
-        from .actions import fit_session
+        from .fitting import fit_session
 
         self.finish_poses()
         with self._lock:
