@@ -3,8 +3,13 @@
 
 use super::*;
 
+/// Steps predicted to lower the cost by less than this fraction are evaluated without `JᵀJ`.
+const LIGHT_STEP: f64 = 1e-4;
+
 /// Levenberg-Marquardt (or Gauss-Newton) on `points` with the residual `r₀ - h c`; returns the
-/// solution, the sums of the pass at it (with `JᵀJ`) and the `h` in force there. With
+/// solution, the sums of the pass at it (with the `JᵀJ` of the last pass that summed it: at
+/// the solution, or steps before it so small, at most 1 % of the relative noise level, that
+/// the standard errors hardly change) and the `h` in force there. With
 /// [`Noise::Estimated`], `h` follows the residuals of each accepted pass (steps are judged with
 /// the `h` they were computed for), so that one run converges to the debiased fixed point.
 pub(super) fn refine<const P: usize>(
@@ -61,6 +66,13 @@ pub(super) fn refine<const P: usize>(
             converged = true;
             break;
         }
+        // A step whose predicted decrease is a small fraction f of the cost moves the
+        // parameters by about σ√f relative to their size (σ the relative noise), and `JᵀJ`
+        // by as little: its pass need not sum `JᵀJ` again (the expensive part), the next
+        // step and the statistics use the one already summed.
+        let light = predicted <= LIGHT_STEP * cost;
+        let mut trial = want;
+        trial.jtj = !light;
         let mut scale = 1.0;
         let mut accepted = None;
         // LM tries one step per iteration; GN halves its step up to 10 times
@@ -70,7 +82,10 @@ pub(super) fn refine<const P: usize>(
             for i in 0..P {
                 cand[i] += scale * delta[i];
             }
-            let cacc = kernel::pass::<P>(points, &setup(norm, &cand), want, par);
+            let mut cacc = kernel::pass::<P>(points, &setup(norm, &cand), trial, par);
+            if light {
+                cacc.jtj = acc.jtj;
+            }
             let ccost = cacc.cost(h);
             if ccost.is_finite() && ccost <= cost {
                 accepted = Some((cand, cacc, ccost));
