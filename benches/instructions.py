@@ -98,6 +98,8 @@ def report() -> None:
     print(f"one pass with J^T J:            {unit:6.1f} instructions per point")
     print(f"a polishing pass (J^T r only):  {per_pass['polish']:6.1f}")
     print(f"the last pass (+ noise sums):   {per_pass['last']:6.1f} (with coverage)")
+    small = sum(count("fit", 10, FIT))
+    print(f"fit_ellipsoid, N=10: {small:,} instructions (the fixed cost of a fit)")
     for size in (1_000, 10_000, 100_000, 1_000_000):
         total = sum(count("fit", size, FIT))
         print(f"fit_ellipsoid, N={size:>9,}: {total / size:8.1f} instructions per point = "
