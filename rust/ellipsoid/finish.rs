@@ -23,6 +23,8 @@ pub(super) fn finish<const P: usize>(
     // (W itself when it is positive definite, the usual case).
     let w_raw = w_of(&th);
     let ev = geometry::sym3_eigenvalues(&w_raw);
+    // the eigenvalues of W1, for the bound on the gains below (W1 = W is the usual case)
+    let mut gains = ev;
     let w1 = if ev[2] > 1e-9 * ev[0] && ev.iter().all(|v| v.is_finite()) {
         w_raw
     } else {
@@ -32,7 +34,9 @@ pub(super) fn finish<const P: usize>(
             return Err(not_determined(model, "a gain went to zero"));
         }
         let w = e.eigenvectors * Matrix3::from_diagonal(&abs_l) * e.eigenvectors.transpose();
-        (w + w.transpose()) * 0.5
+        let w = (w + w.transpose()) * 0.5;
+        gains = geometry::sym3_eigenvalues(&w);
+        w
     };
 
     // conditioning and standard errors in normalised coordinates (fixed parameters: rows and
@@ -117,7 +121,7 @@ pub(super) fn finish<const P: usize>(
     }
 
     // physical bounds (rust/bounds.rs): implausible gains, or a run-away unconverged fit
-    bounds::check_axis_ratio(&w1, model.name())?;
+    bounds::check_gains(gains, model.name())?;
     let raw_radius = radius / matrix.norm() * 3f64.sqrt();
     let worst = if exact {
         0.0
