@@ -99,14 +99,6 @@ pub fn cholesky_solve_in_place<const N: usize>(l: &[[f64; N]; N], y: &mut [f64; 
     });
 }
 
-/// Solves `L Lᵀ x = b` with the factor from [`cholesky`].
-#[inline]
-pub fn cholesky_solve<const N: usize>(l: &[[f64; N]; N], b: &[f64; N]) -> [f64; N] {
-    let mut y = *b;
-    cholesky_solve_in_place(l, &mut y);
-    y
-}
-
 /// Solves `A x = b` for the symmetric positive-definite `a` (its lower triangle), overwriting
 /// `a` with its factor and `b` with `x`; `false` unless `a` is positive definite. For a factor
 /// used once: the caller's matrix is the workspace.
@@ -170,8 +162,16 @@ pub fn sqrtm3(a: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
             for j in 0..3 {
                 let axi = a[i][0] * xi[0][j] + a[i][1] * xi[1][j] + a[i][2] * xi[2][j];
                 next[i][j] = 0.5 * (x[i][j] + axi);
-                change = change.max((next[i][j] - x[i][j]).abs());
-                size = size.max(next[i][j].abs());
+                // (comparisons rather than `f64::max`, whose NaN handling costs a few
+                // instructions each: the same result, as neither side starts as NaN)
+                let d = (next[i][j] - x[i][j]).abs();
+                if d > change {
+                    change = d;
+                }
+                let v = next[i][j].abs();
+                if v > size {
+                    size = v;
+                }
             }
         }
         // symmetrise (round-off only)
@@ -222,7 +222,7 @@ pub fn inverse3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Matrix3, SMatrix};
+    use nalgebra::{Matrix3, SMatrix, SVector};
 
     #[test]
     fn cholesky_solve_and_inverse_match_nalgebra() {
@@ -231,7 +231,8 @@ mod tests {
         let arr: [[f64; 5]; 5] = std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
         let l = cholesky(&arr).unwrap();
         let rhs = [1.0, -2.0, 0.5, 3.0, -1.0];
-        let x = cholesky_solve(&l, &rhs);
+        let mut x = rhs;
+        cholesky_solve_in_place(&l, &mut x);
         let want = a
             .cholesky()
             .unwrap()
@@ -246,6 +247,42 @@ mod tests {
         }
         let not_pd = [[1.0, 2.0], [2.0, 1.0]];
         assert!(cholesky(&not_pd).is_none());
+    }
+
+    #[test]
+    fn unrolled_solve_matches_nalgebra_for_the_fit_sizes() {
+        fn check<const N: usize>() {
+            let b = SMatrix::<f64, N, N>::from_fn(|i, j| ((i * 7 + j * 3) % 5) as f64 - 1.5);
+            let a = b * b.transpose() + SMatrix::<f64, N, N>::identity() * 0.5;
+            let mut arr: [[f64; N]; N] =
+                std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
+            // the strict upper triangle is neither read nor written
+            for i in 0..N {
+                for j in i + 1..N {
+                    arr[i][j] = f64::NAN;
+                }
+            }
+            let rhs: [f64; N] = std::array::from_fn(|i| i as f64 - 2.0);
+            let mut x = rhs;
+            assert!(spd_solve_in_place(&mut arr, &mut x));
+            let want = a.cholesky().unwrap().solve(&SVector::<f64, N>::from(rhs));
+            for i in 0..N {
+                assert!(
+                    (x[i] - want[i]).abs() < 1e-10 * (1.0 + want[i].abs()),
+                    "{N}"
+                );
+                assert!(arr[i][i + 1..].iter().all(|v| v.is_nan()));
+            }
+            let mut neg = [[0.0; N]; N];
+            neg[0][0] = 1.0;
+            assert!(!spd_solve_in_place(&mut neg, &mut [1.0; N]));
+        }
+        check::<3>();
+        check::<4>();
+        check::<6>();
+        check::<7>();
+        check::<9>();
+        check::<10>();
     }
 
     #[test]
