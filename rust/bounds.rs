@@ -33,7 +33,13 @@ pub const WARN_MIN_SPREAD: f64 = 0.1;
 
 /// Checks the gains of a fit; `model` names it in the message.
 pub fn check_axis_ratio(w: &Matrix3<f64>, model: &str) -> Result<(), CalError> {
-    let e = crate::geometry::sym3_eigenvalues(w).map(f64::abs);
+    check_gains(crate::geometry::sym3_eigenvalues(w), model)
+}
+
+/// [`check_axis_ratio`] from the eigenvalues of `W` (any order), for a caller that has them
+/// already: each `sym3_eigenvalues` costs a few hundred instructions (`acos`, `cos`).
+pub fn check_gains(eigenvalues: [f64; 3], model: &str) -> Result<(), CalError> {
+    let e = eigenvalues.map(f64::abs);
     let ratio =
         e.iter().cloned().fold(0.0, f64::max) / e.iter().cloned().fold(f64::INFINITY, f64::min);
     if !(ratio <= MAX_AXIS_RATIO) {

@@ -210,6 +210,20 @@ pub fn spread(points: &[[f64; 3]]) -> Spread {
     })
 }
 
+/// Bounds `(lo, hi)` on the eigenvalues of the symmetric `a` (its upper triangle is read):
+/// their mean `q = tr a / 3` minus and plus the Frobenius norm of `a - q I`, which bounds every
+/// `|λ - q|`. About 20 instructions against several hundred for [`sym3_eigenvalues`] (`acos`,
+/// `cos`): for tests that only compare eigenvalues with a bound, which these settle whenever the
+/// matrix is not far from a multiple of the identity (calibrated gains, well spread directions).
+/// NaN or infinite when `a` is not finite.
+pub fn sym3_eigenvalue_bounds(a: &Matrix3<f64>) -> (f64, f64) {
+    let q = (a[(0, 0)] + a[(1, 1)] + a[(2, 2)]) / 3.0;
+    let off = a[(0, 1)] * a[(0, 1)] + a[(0, 2)] * a[(0, 2)] + a[(1, 2)] * a[(1, 2)];
+    let d = [a[(0, 0)] - q, a[(1, 1)] - q, a[(2, 2)] - q];
+    let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + 2.0 * off).sqrt();
+    (q - r, q + r)
+}
+
 /// Eigenvalues of a symmetric 3x3 matrix, largest first.
 ///
 /// The trigonometric solution of the characteristic cubic gives the most isolated eigenvalue
@@ -314,6 +328,26 @@ pub fn classify(s: &Scan, n: usize, what: &str) -> Result<Spread> {
 mod tests {
     use super::*;
     use nalgebra::SymmetricEigen;
+
+    #[test]
+    fn eigenvalue_bounds_bracket_the_eigenvalues() {
+        let ms = [
+            Matrix3::new(2.0, 0.3, -0.1, 0.3, 1.0, 0.2, -0.1, 0.2, 0.5),
+            Matrix3::new(1.02, 0.01, -0.03, 0.01, 0.97, 0.02, -0.03, 0.02, 1.0),
+            Matrix3::new(4.0, 1.0, 0.0, 1.0, -4.0, 0.0, 0.0, 0.0, 0.0),
+            Matrix3::identity() * 3.0,
+        ];
+        for m in ms {
+            let (lo, hi) = sym3_eigenvalue_bounds(&m);
+            let ev = sym3_eigenvalues(&m);
+            assert!(
+                lo <= ev[2] + 1e-15 && ev[0] <= hi + 1e-15,
+                "{lo} {ev:?} {hi}"
+            );
+        }
+        let (lo, hi) = sym3_eigenvalue_bounds(&(Matrix3::identity() * f64::NAN));
+        assert!(lo.is_nan() && hi.is_nan());
+    }
 
     #[test]
     fn closed_form_eigenvalues_match_nalgebra() {

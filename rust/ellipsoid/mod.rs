@@ -319,30 +319,35 @@ fn full_matrix<const P: usize>(jtj: &[[f64; P]; P]) -> SMatrix<f64, P, P> {
 }
 
 /// Solves `(JᵀJ + λ diag JᵀJ) δ = -Jᵀr` for the free parameters (`δ = 0` for fixed ones).
+///
+/// `jtj` must be exactly symmetric (as [`full_matrix`] makes it): its column-major storage is
+/// then read as the row-major array the Cholesky factorisation works on, with no element-wise
+/// copy, and only its lower triangle is set up and factored.
 fn solve<const P: usize>(
     jtj: &SMatrix<f64, P, P>,
     jtr: &[f64; P],
     lambda: f64,
     free: &[bool; P],
 ) -> Option<SVector<f64, P>> {
-    let mut a = *jtj;
-    let mut g = SVector::<f64, P>::from_fn(|i, _| -jtr[i]);
+    // data.0[c][r] = JᵀJ[r][c] = JᵀJ[c][r]
+    let mut a: [[f64; P]; P] = jtj.data.0;
+    let mut x: [f64; P] = std::array::from_fn(|i| -jtr[i]);
     for i in 0..P {
         if free[i] {
-            a[(i, i)] += lambda * jtj[(i, i)].max(1e-12);
+            a[i][i] += lambda * a[i][i].max(1e-12);
         } else {
-            for j in 0..P {
-                a[(i, j)] = 0.0;
-                a[(j, i)] = 0.0;
+            // row and column i of the identity (lower triangle only)
+            for j in 0..i {
+                a[i][j] = 0.0;
             }
-            a[(i, i)] = 1.0;
-            g[i] = 0.0;
+            for k in i + 1..P {
+                a[k][i] = 0.0;
+            }
+            a[i][i] = 1.0;
+            x[i] = 0.0;
         }
     }
-    let arr: [[f64; P]; P] = std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
-    let l = linalg::cholesky(&arr)?;
-    let x = linalg::cholesky_solve(&l, &std::array::from_fn(|i| g[i]));
-    Some(SVector::<f64, P>::from_column_slice(&x))
+    linalg::spd_solve_in_place(&mut a, &mut x).then(|| SVector::<f64, P>::from(x))
 }
 
 /// The noise term `h = σ²/2` of the debiased residual: the fixed point `h = Σ(r₀ - h c)² /
