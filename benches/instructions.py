@@ -9,9 +9,9 @@
 - ``fit_batch`` of 200-point sets: instructions per set (target: at most 90,000), and how the
   work splits between two rayon threads (the bound on the speed-up of two threads).
 
-``--check`` is the regression guard of ``make test``: it counts a fixed 1e5-point fit and a
-fixed batch of 1,000 sets and fails if either grew by more than 10 % over the figures in
-``benches/instructions.json`` (``--update`` rewrites them). The workloads are the Rust example
+``--check`` is the regression guard of ``make test``: it counts a fit of 10 points (the fixed
+cost of a call), a fixed 1e5-point fit and a fixed batch of 1,000 sets and fails if any grew
+by more than 10 % over the figures in ``benches/instructions.json`` (``--update`` rewrites them). The workloads are the Rust example
 ``benches/instructions.rs`` (deterministic data, one thread); the counts are those of the
 kernels this CPU runs (AVX2 + FMA, or the portable build), each with its own figures. Without
 valgrind the check is skipped with a message; everything else missing is an error.
@@ -83,6 +83,7 @@ PASS = "triaxcal::ellipsoid::bench_one_pass"
 
 def measure_guard() -> dict[str, int]:
     return {
+        "fit_10": sum(count("fit", 10, FIT)),
         "fit_1e5": sum(count("fit", 100_000, FIT)),
         "batch_1000": sum(count("batch", 1000, FIT)),
     }
