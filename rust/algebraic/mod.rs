@@ -6,11 +6,12 @@
 //! axis and sphere models). It minimises an algebraic error, which noise biases by O(σ²); the
 //! geometric refinement in `ellipsoid` removes that.
 
-use crate::kernel::LANES;
 use crate::linalg;
-use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
-use rayon::prelude::*;
+
+mod scatter;
+
+use scatter::scatter;
 
 /// Normalised coordinates `q = (p - mean) * inv_scale`.
 #[derive(Clone, Copy, Debug)]
@@ -97,147 +98,6 @@ fn quadric_to_ellipsoid(
     linalg::cholesky(&arr)?;
     let w = linalg::sqrtm3(&arr)?;
     Some((o, Matrix3::from_fn(|i, j| w[i][j])))
-}
-
-/// `Σ d dᵀ` over the design rows `d` of the normalised points.
-fn scatter<const M: usize>(points: &[[f64; 3]], norm: Norm, parallel: bool) -> SMatrix<f64, M, M> {
-    let part = |c: &[[f64; 3]]| dispatch!(|simd| scatter_lanes::<_, M>(simd, c, norm));
-    let acc = if parallel && points.len() > crate::kernel::PARALLEL_ABOVE {
-        points.par_chunks(crate::kernel::CHUNK).map(part).reduce(
-            || [[0.0; M]; M],
-            |mut a, b| {
-                for i in 0..M {
-                    for j in i..M {
-                        a[i][j] += b[i][j];
-                    }
-                }
-                a
-            },
-        )
-    } else {
-        part(points)
-    };
-    SMatrix::<f64, M, M>::from_fn(|i, j| if i <= j { acc[i][j] } else { acc[j][i] })
-}
-
-/// Groups per block of the scatter (see `kernel`'s blocks).
-const BLOCK: usize = 8;
-
-/// The design rows of a group: `x², y², z², [2xy, 2xz, 2yz,] 2x, 2y, 2z, 1` (times `wt`).
-#[inline(always)]
-fn design<S: Simd, const M: usize>(
-    s: S,
-    x: [S::V; 3],
-    mean: &[S::V; 3],
-    inv: S::V,
-    wt: S::V,
-) -> [S::V; M] {
-    let q = arr3!(|k| s.mul(s.sub(x[k], mean[k]), inv));
-    let q2 = arr3!(|k| s.mul(s.add(q[k], q[k]), wt)); // 2x, 2y, 2z (weighted)
-    let mut d = [s.zero(); M];
-    for k in 0..3 {
-        d[k] = s.mul(s.mul(q[k], q[k]), wt);
-    }
-    if M == 10 {
-        d[3] = s.mul(q[0], q2[1]);
-        d[4] = s.mul(q[0], q2[2]);
-        d[5] = s.mul(q[1], q2[2]);
-    }
-    d[M - 4] = q2[0];
-    d[M - 3] = q2[1];
-    d[M - 2] = q2[2];
-    d[M - 1] = wt;
-    d
-}
-
-/// Entries of the packed upper triangle of the (at most 10 x 10) scatter matrix.
-const PACKED: usize = 55;
-
-/// Index of `(a, b)`, `a <= b`, in the packed upper triangle of an `m x m` matrix.
-#[inline(always)]
-const fn packed(m: usize, a: usize, b: usize) -> usize {
-    a * m - a * a.saturating_sub(1) / 2 - if a > 0 { a } else { 0 } + b
-}
-
-/// Adds the `G` design rows `rows` to `acc`, one row of the scatter matrix at a time (its
-/// accumulators in registers).
-#[inline(always)]
-fn add_rows<S: Simd, const M: usize, const G: usize>(
-    s: S,
-    rows: &[[S::V; M]; G],
-    acc: &mut [S::V; PACKED],
-) {
-    macro_rules! row {
-        ($a:literal) => {
-            if $a < M {
-                let mut row = [s.zero(); M];
-                for d in rows.iter() {
-                    for b in $a..M {
-                        row[b] = s.fma(d[$a], d[b], row[b]);
-                    }
-                }
-                for b in $a..M {
-                    let i = packed(M, $a, b);
-                    acc[i] = s.add(acc[i], row[b]);
-                }
-            }
-        };
-    }
-    row!(0);
-    row!(1);
-    row!(2);
-    row!(3);
-    row!(4);
-    row!(5);
-    row!(6);
-    row!(7);
-    row!(8);
-    row!(9);
-}
-
-/// Upper triangle of `Σ d dᵀ` over the design rows of the points.
-#[inline(always)]
-fn scatter_lanes<S: Simd, const M: usize>(s: S, points: &[[f64; 3]], norm: Norm) -> [[f64; M]; M] {
-    let mut acc = [s.zero(); PACKED];
-    let mean = arr3!(|k| s.splat(norm.mean[k]));
-    let inv = s.splat(norm.inv_scale);
-    let one = s.splat(1.0);
-    let (groups, rest) = points.as_chunks::<LANES>();
-    let (blocks, tail) = groups.as_chunks::<BLOCK>();
-    for b in blocks {
-        macro_rules! d {
-            ($g:literal) => {
-                design::<S, M>(s, s.load_xyz(&b[$g]), &mean, inv, one)
-            };
-        }
-        let rows = [d!(0), d!(1), d!(2), d!(3), d!(4), d!(5), d!(6), d!(7)];
-        add_rows::<S, M, BLOCK>(s, &rows, &mut acc);
-    }
-    for grp in tail {
-        let rows = [design::<S, M>(s, s.load_xyz(grp), &mean, inv, one)];
-        add_rows::<S, M, 1>(s, &rows, &mut acc);
-    }
-    if !rest.is_empty() {
-        let mut wt = [0.0; LANES];
-        wt[..rest.len()].fill(1.0);
-        let mut grp = [rest[0]; LANES];
-        grp[..rest.len()].copy_from_slice(rest);
-        let rows = [design::<S, M>(
-            s,
-            s.load_xyz(&grp),
-            &mean,
-            inv,
-            s.vector(wt),
-        )];
-        add_rows::<S, M, 1>(s, &rows, &mut acc);
-    }
-    let mut out = [[0.0; M]; M];
-    for a in 0..M {
-        for b in a..M {
-            out[a][b] = s.sum(acc[packed(M, a, b)]);
-        }
-    }
-    out
 }
 
 /// Smallest eigenvector of the symmetric positive semi-definite `s`: inverse iteration on the
