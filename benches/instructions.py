@@ -11,10 +11,11 @@
 
 ``--check`` is the regression guard of ``make test``: it counts a fit of 10 points (the fixed
 cost of a call), a fixed 1e5-point fit and a fixed batch of 1,000 sets and fails if any grew
-by more than 10 % over the figures in ``benches/instructions.json`` (``--update`` rewrites them). The workloads are the Rust example
-``benches/instructions.rs`` (deterministic data, one thread); the counts are those of the
-kernels this CPU runs (AVX2 + FMA, or the portable build), each with its own figures. Without
-valgrind the check is skipped with a message; everything else missing is an error.
+by more than 10 % over the figures in ``benches/instructions.json`` (``--update`` rewrites
+them). The workloads are the Rust example ``benches/instructions.rs`` (deterministic data, one
+thread); the counts are those of the kernels this CPU runs (AVX2 + FMA, or the portable
+build), each with its own figures. Without valgrind the check is skipped with a message;
+everything else missing is an error.
 """
 
 from __future__ import annotations
