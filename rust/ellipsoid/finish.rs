@@ -22,9 +22,10 @@ pub(super) fn finish<const P: usize>(
     // W and -W (or any sign flip of an eigenvalue) give the same residuals: take |W|
     // (W itself when it is positive definite, the usual case).
     let w_raw = w_of(&th);
-    // The usual case needs no eigenvalues: gains within a factor 1 ± 0.45 of their mean are
-    // positive, finite and within the bound on their ratio (rust/bounds.rs) for certain, with
-    // a margin far above the round-off of `sym3_eigenvalues`, so the tests below pass.
+    // The usual case needs no eigenvalues: when the bounds mean ± ‖W - mean I‖ on them are
+    // positive and within the bound on their ratio (rust/bounds.rs; gains within about 1 ± 0.5
+    // of their mean), W is positive definite and its gains plausible for certain, with a
+    // margin far above the round-off of `sym3_eigenvalues`.
     let (lo, hi) = geometry::sym3_eigenvalue_bounds(&w_raw);
     let clearly_plausible = lo > 0.0 && hi <= (1.0 - 1e-6) * bounds::MAX_AXIS_RATIO * lo;
     // (W1, its eigenvalues for the bound on the gains below unless it certainly holds)
