@@ -97,7 +97,7 @@ def require_radius(radius: Any) -> float:
             f"radius must be a number (1.0 for g, 9.80665 for m/s^2, the field in uT), got "
             f"{radius!r}"
         )
-    r = float(radius)
+    r = _float(radius)
     if not (math.isfinite(r) and r > 0):
         raise CalibrationError(f"radius must be a finite number greater than zero, got {r}")
     return r
@@ -106,6 +106,15 @@ def require_radius(radius: Any) -> float:
 def _is_real(value: Any) -> bool:
     """A real number: int, float or a numpy real scalar -- not a bool, a string or complex."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def _float(value: Any) -> float:
+    """``float(value)`` of a real number; an int too large for a float is an infinity (so that
+    the range check refuses it with its message rather than an OverflowError)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 def as_count(value: Any, name: str, *, lo: int = 0, hi: int) -> int:
@@ -135,7 +144,7 @@ def as_real(
     what = f"a number in {left}{lo:g}, {hi:g}{right}"
     if not _is_real(value):
         raise CalibrationError(f"{name} must be {what}, got {value!r}")
-    v = float(value)
+    v = _float(value)
     ok = not math.isnan(v) and (allow_inf or math.isfinite(v))
     ok = ok and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
     if not ok:
