@@ -16,6 +16,8 @@ __all__ = [
     "grid_center",
     "fit_sphere_linear",
     "fit_ellipsoid",
+    "time_fit",
+    "repeat_call",
     "fit_batch",
     "apply",
     "AllanStream",
@@ -47,17 +49,19 @@ def grid_center(
 ) -> dict[str, Any]: ...
 def fit_sphere_linear(points: _Points) -> tuple[_Vec3, float, float]: ...
 def fit_ellipsoid(
-    points: _Points,
-    model: str,
-    radius: float | None,
-    max_iter: int,
-    tol: float,
-    method: str,
-    debias: bool,
-    fixed: list[float | None] | None = None,
-) -> tuple[
-    str, npt.NDArray[np.float64], float, float, float, int, bool, int, tuple[str, ...]
-]: ...
+    points: Any,
+    cls: type,
+    model: Any,
+    radius: Any,
+    max_iter: Any,
+    tol: Any,
+    method: Any,
+    debias: Any,
+    fixed: list[float | None] | None,
+    fixed_names: tuple[str, ...],
+) -> Any: ...
+def time_fit(points: _Points, radius: float | None, repeats: int) -> float: ...
+def repeat_call(f: Any, times: int) -> None: ...
 def fit_batch(
     points: _Points,
     bounds: npt.NDArray[np.int64],

@@ -140,23 +140,6 @@ class EllipsoidFit:
     model_reason: str | None = None
     fixed: tuple[str, ...] = ()
 
-    @classmethod
-    def _from_core(cls, t: tuple, fixed: tuple[str, ...] = ()) -> EllipsoidFit:
-        """From the core's tuple ``(model, values, radius, rms, condition, iterations,
-        converged, n, warnings)``; ``values`` holds offset, matrix and standard errors."""
-        model, v, radius, rms, condition, iterations, converged, n, warnings = t
-        v.flags.writeable = False  # its views below are read-only too
-        # filled in directly: the same fields the generated __init__ would set, without its
-        # per-field frozen-setattr cost (this runs once per fit, even of 10 points)
-        obj = object.__new__(cls)
-        obj.__dict__.update(
-            model=model, offset=v[:3], matrix=v[3:12].reshape(3, 3), radius=radius, rms=rms,
-            stderr=v[12:], param_names=PARAM_NAMES[model], iterations=iterations,
-            converged=converged, condition=condition, n=n, warnings=warnings,
-            model_reason=None, fixed=fixed,
-        )
-        return obj
-
     def apply(self, points: Any) -> np.ndarray:
         """Calibrate raw readings: ``(points - offset) @ matrix.T``, shape (N, 3).
 
@@ -267,7 +250,16 @@ def fit_ellipsoid(
     >>> np.round(fit.offset, 1).tolist(), np.round(np.diag(fit.matrix), 4).tolist()
     ([550.0, 299.4, -20.0], [1.002, 0.999, 1.0])
     """
-    if model == "auto":
+    if fixed is None:
+        # the common call: the core checks that the arguments are already plain and valid,
+        # fits and builds the result (None: something needs validating or converting first,
+        # or model is "auto")
+        fit = _core.fit_ellipsoid(
+            points, EllipsoidFit, model, radius, max_iter, tol, method, debias, None, ()
+        )
+        if fit is not None:
+            return fit
+    if isinstance(model, str) and model == "auto":
         auto = fit_auto(
             points, radius=radius, max_iter=max_iter, tol=tol, method=method, debias=debias,
             fixed=fixed,
@@ -276,7 +268,10 @@ def fit_ellipsoid(
     opts = _options(model, radius, max_iter, tol, method, debias)
     fix, names = _fixed_vector(fixed, model, opts[1]) if fixed else (None, ())
     pts = points if _ready(points) else as_points(points)
-    return EllipsoidFit._from_core(_core.fit_ellipsoid(pts, *opts, fix), names)
+    fit = _core.fit_ellipsoid(pts, EllipsoidFit, *opts, fix, names)
+    if fit is None:  # the options and points are plain now: the core must have fitted
+        raise RuntimeError("triaxcal._core.fit_ellipsoid refused validated arguments")
+    return fit
 
 
 def fit_sphere(

@@ -4,18 +4,18 @@
 
 mod allan;
 mod errors;
+mod fit;
 
 use crate::batch;
-use crate::ellipsoid::{self, EllipsoidFit, FitOptions, Method, Model};
+use crate::ellipsoid::{self, FitOptions, Method, Model};
 use crate::error::CalError;
 use crate::sphere::{self, Descent, DescentOptions};
 use errors::{py_result, CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError};
 use numpy::{
     PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
 };
-use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyTuple};
+use pyo3::types::PyDict;
 
 /// Borrows an (N, 3) aligned, C-contiguous float64 array as points, without copying. (The
 /// Python facade converts anything else first: `triaxcal._validate.as_points`.)
@@ -50,35 +50,6 @@ fn descent_dict<'py>(py: Python<'py>, d: Descent) -> PyResult<Bound<'py, PyDict>
     out.set_item("step", d.step)?;
     out.set_item("converged", d.converged)?;
     Ok(out)
-}
-
-/// A fit as a tuple `(model, values, radius, rms, condition, iterations, converged, n,
-/// warnings)`, `values` holding offset (3), matrix (9, row-major) and the standard errors: one
-/// array for the Python facade to view into.
-fn fit_tuple<'py>(py: Python<'py>, f: EllipsoidFit) -> PyResult<Bound<'py, PyTuple>> {
-    let mut values = Vec::with_capacity(12 + f.stderr.len());
-    values.extend_from_slice(&f.offset);
-    for row in &f.matrix {
-        values.extend_from_slice(row);
-    }
-    values.extend_from_slice(&f.stderr);
-    let model = match f.model {
-        Model::Sphere => intern!(py, "sphere"),
-        Model::Axis => intern!(py, "axis"),
-        Model::Full => intern!(py, "full"),
-    };
-    (
-        model,
-        PyArray1::from_vec(py, values),
-        f.radius,
-        f.rms,
-        f.condition,
-        f.iterations,
-        f.converged,
-        f.n,
-        PyTuple::new(py, f.warnings)?,
-    )
-        .into_pyobject(py)
 }
 
 fn options(
@@ -165,27 +136,6 @@ fn fit_sphere_linear(
     let pts = self::points(&points)?;
     let f = py_result(py.detach(|| sphere::fit_sphere_linear(pts)))?;
     Ok((f.center, f.radius, f.rms))
-}
-
-/// Geometric ellipsoid fit; returns a tuple of plain values (see `fit_tuple`). The options are
-/// positional: the facade (`triaxcal.fit`) passes them in this order.
-#[pyfunction]
-#[pyo3(signature = (points, model, radius, max_iter, tol, method, debias, fixed=None))]
-fn fit_ellipsoid<'py>(
-    py: Python<'py>,
-    points: PyReadonlyArray2<'py, f64>,
-    model: &str,
-    radius: Option<f64>,
-    max_iter: usize,
-    tol: f64,
-    method: &str,
-    debias: bool,
-    fixed: Option<[Option<f64>; 9]>,
-) -> PyResult<Bound<'py, PyTuple>> {
-    let pts = self::points(&points)?;
-    let opts = options(model, radius, max_iter, tol, method, debias, fixed)?;
-    let f = py_result(py.detach(|| ellipsoid::fit_ellipsoid(pts, &opts)))?;
-    fit_tuple(py, f)
 }
 
 /// Fits many sets: `points` holds them back to back, set i is rows `bounds[i]..bounds[i+1]`.
@@ -296,7 +246,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(descend_center, m)?)?;
     m.add_function(wrap_pyfunction!(grid_center, m)?)?;
     m.add_function(wrap_pyfunction!(fit_sphere_linear, m)?)?;
-    m.add_function(wrap_pyfunction!(fit_ellipsoid, m)?)?;
+    m.add_function(wrap_pyfunction!(fit::fit_ellipsoid, m)?)?;
+    m.add_function(wrap_pyfunction!(fit::time_fit, m)?)?;
+    m.add_function(wrap_pyfunction!(fit::repeat_call, m)?)?;
     m.add_function(wrap_pyfunction!(fit_batch, m)?)?;
     m.add_function(wrap_pyfunction!(apply, m)?)?;
     m.add_class::<allan::AllanStream>()?;
