@@ -18,32 +18,41 @@ use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyString, PyTuple, PyType};
 
-/// Most refinement steps (`triaxcal.fit.MAX_ITER`).
-const MAX_ITER: usize = 1_000_000;
-
 /// Up to this many points a fit takes under about 0.3 ms (211 instructions a point): it keeps
 /// the GIL rather than releasing and re-taking it around the fit, and reads the points in place
 /// under it. Larger fits borrow them through numpy's borrow checker and release the GIL.
 const HOLD_GIL_UP_TO: usize = 1024;
 
-/// `triaxcal.fit.PARAM_NAMES`, per model (sphere, axis, full).
-const PARAM_NAMES: [&[&str]; 3] = [
-    &["offset_x", "offset_y", "offset_z", "data_radius"],
-    &[
-        "offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
-    ],
-    &[
-        "offset_x",
-        "offset_y",
-        "offset_z",
-        "diag_x",
-        "diag_y",
-        "diag_z",
-        "offdiag_xy",
-        "offdiag_xz",
-        "offdiag_yz",
-    ],
-];
+/// What the binding takes from the facade's module (`triaxcal.fit`, the module of the class it
+/// is given), once: `MAX_ITER`, `PARAM_NAMES` per model (sphere, axis, full) and
+/// `object.__new__`. One source for each: the facade's.
+struct Facade {
+    max_iter: usize,
+    param_names: [Py<PyTuple>; 3],
+    object_new: Py<PyAny>,
+}
+
+fn facade<'a>(py: Python<'_>, cls: &Bound<'_, PyType>) -> PyResult<&'a Facade> {
+    static FACADE: PyOnceLock<Facade> = PyOnceLock::new();
+    FACADE.get_or_try_init(py, || {
+        let module = PyModule::import(
+            py,
+            cls.getattr(intern!(py, "__module__"))?.cast::<PyString>()?,
+        )?;
+        let names = module.getattr("PARAM_NAMES")?;
+        let t = |m: &str| -> PyResult<Py<PyTuple>> {
+            Ok(names.get_item(m)?.cast_into::<PyTuple>()?.unbind())
+        };
+        Ok(Facade {
+            max_iter: module.getattr("MAX_ITER")?.extract()?,
+            param_names: [t("sphere")?, t("axis")?, t("full")?],
+            object_new: PyModule::import(py, "builtins")?
+                .getattr("object")?
+                .getattr("__new__")?
+                .unbind(),
+        })
+    })
+}
 
 fn model_index(m: Model) -> usize {
     match m {
@@ -91,6 +100,7 @@ fn exact_options(
     method: &Bound<'_, PyAny>,
     debias: &Bound<'_, PyAny>,
     fixed: Option<[Option<f64>; 9]>,
+    most_iter: usize,
 ) -> Option<FitOptions> {
     let py = model.py();
     let model = one_of(
@@ -120,7 +130,7 @@ fn exact_options(
     let max_iter = max_iter
         .extract::<usize>()
         .ok()
-        .filter(|&m| m <= MAX_ITER)?;
+        .filter(|&m| m <= most_iter)?;
     let tol = exact_real(tol).filter(|t| (0.0..1.0).contains(t))?;
     let debias = debias.cast_exact::<PyBool>().ok()?.is_true();
     Some(FitOptions {
@@ -187,19 +197,8 @@ fn fit_object<'py>(
     f: EllipsoidFit,
     fixed_names: &Bound<'py, PyTuple>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    static OBJECT_NEW: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
-    static NAMES: PyOnceLock<[Py<PyTuple>; 3]> = PyOnceLock::new();
-    let object_new = OBJECT_NEW.get_or_try_init(py, || {
-        pyo3::types::PyModule::import(py, "builtins")?
-            .getattr("object")?
-            .getattr("__new__")
-            .map(Bound::unbind)
-    })?;
-    let names = NAMES.get_or_try_init(py, || -> PyResult<[Py<PyTuple>; 3]> {
-        let t = |i: usize| PyTuple::new(py, PARAM_NAMES[i]).map(Bound::unbind);
-        Ok([t(0)?, t(1)?, t(2)?])
-    })?;
-    let obj = object_new.bind(py).call1((cls,))?;
+    let facade = facade(py, cls)?;
+    let obj = facade.object_new.bind(py).call1((cls,))?;
     let d = obj.getattr(intern!(py, "__dict__"))?;
     let d = d.cast::<PyDict>()?;
 
@@ -218,7 +217,7 @@ fn fit_object<'py>(
     d.set_item(intern!(py, "radius"), f.radius)?;
     d.set_item(intern!(py, "rms"), f.rms)?;
     d.set_item(intern!(py, "stderr"), stderr)?;
-    d.set_item(intern!(py, "param_names"), names[m].bind(py))?;
+    d.set_item(intern!(py, "param_names"), facade.param_names[m].bind(py))?;
     d.set_item(intern!(py, "iterations"), f.iterations)?;
     d.set_item(intern!(py, "converged"), f.converged)?;
     d.set_item(intern!(py, "condition"), f.condition)?;
@@ -248,9 +247,12 @@ pub(super) fn fit_ellipsoid<'py>(
     fixed: Option<[Option<f64>; 9]>,
     fixed_names: &Bound<'py, PyTuple>,
 ) -> PyResult<Option<Bound<'py, PyAny>>> {
+    let most_iter = facade(py, cls)?.max_iter;
     let (Some(arr), Some(opts)) = (
         ready_points(points),
-        exact_options(model, radius, max_iter, tol, method, debias, fixed),
+        exact_options(
+            model, radius, max_iter, tol, method, debias, fixed, most_iter,
+        ),
     ) else {
         return Ok(None);
     };
