@@ -1,7 +1,7 @@
 """triaxcal: calibrate three-axis accelerometers, gyroscopes and magnetometers.
 
-Fits run in Rust (``triaxcal._core``) with the GIL released; capture, export and the CLI are
-Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
+Fits run in Rust (``triaxcal._core``), large ones with the GIL released; capture, export and
+the CLI are Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
 """
 
 from . import rotations, sim

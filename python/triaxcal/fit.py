@@ -183,9 +183,10 @@ def fit_ellipsoid(
     """Fit offset and gain matrix so that calibrated readings have constant magnitude.
 
     Minimises the geometric residual ``|matrix @ (p - offset)| - radius`` by
-    Levenberg-Marquardt, started from an algebraic ellipsoid fit. Runs in Rust with the GIL
-    released; the points are streamed, not copied (aligned float64 C-contiguous input is
-    borrowed; anything else is converted first).
+    Levenberg-Marquardt, started from an algebraic ellipsoid fit. Runs in Rust, with the GIL
+    released above 1,024 points (a smaller fit takes under 0.3 ms and keeps it); the points
+    are streamed, not copied (aligned float64 C-contiguous input is read in place; anything
+    else is converted first).
 
     Parameters
     ----------
