@@ -194,10 +194,10 @@ fn points_under_gil<'a>(_py: Python<'_>, arr: &'a Bound<'_, PyArray2<f64>>) -> &
 fn fit_object<'py>(
     py: Python<'py>,
     cls: &Bound<'py, PyType>,
+    facade: &Facade,
     f: EllipsoidFit,
     fixed_names: &Bound<'py, PyTuple>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let facade = facade(py, cls)?;
     let obj = facade.object_new.bind(py).call1((cls,))?;
     let d = obj.getattr(intern!(py, "__dict__"))?;
     let d = d.cast::<PyDict>()?;
@@ -247,11 +247,18 @@ pub(super) fn fit_ellipsoid<'py>(
     fixed: Option<[Option<f64>; 9]>,
     fixed_names: &Bound<'py, PyTuple>,
 ) -> PyResult<Option<Bound<'py, PyAny>>> {
-    let most_iter = facade(py, cls)?.max_iter;
+    let facade = facade(py, cls)?;
     let (Some(arr), Some(opts)) = (
         ready_points(points),
         exact_options(
-            model, radius, max_iter, tol, method, debias, fixed, most_iter,
+            model,
+            radius,
+            max_iter,
+            tol,
+            method,
+            debias,
+            fixed,
+            facade.max_iter,
         ),
     ) else {
         return Ok(None);
@@ -267,7 +274,7 @@ pub(super) fn fit_ellipsoid<'py>(
         let pts = ro.as_slice()?.as_chunks::<3>().0;
         py_result(py.detach(|| ellipsoid::fit_ellipsoid(pts, &opts)))?
     };
-    fit_object(py, cls, f, fixed_names).map(Some)
+    fit_object(py, cls, facade, f, fixed_names).map(Some)
 }
 
 /// Benchmark aid (`benches/bench_fit.py`, the call-overhead row): seconds per fit of `points`

@@ -1,6 +1,8 @@
 //! The binding layer: the only code that names pyo3 or numpy. Each wrapper extracts borrowed
 //! numpy arrays, releases the GIL, calls the core, and returns plain values; the Python facade
-//! (`python/triaxcal/`) validates input first and builds the result objects.
+//! (`python/triaxcal/`) validates input first and builds the result objects. The exception is
+//! `fit_ellipsoid` (`fit.rs`): it checks plain arguments itself, keeps the GIL for small fits
+//! and builds the `EllipsoidFit`, for the sake of small calls.
 
 mod allan;
 mod errors;
