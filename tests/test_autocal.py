@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from triaxcal.errors import CalibrationError
-from triaxcal.fleet.autocal import StillWindows, fit_still_windows
+from triaxcal.methods.autocal import StillWindows, fit_still_windows
 from triaxcal.sim import FreeLivingSim
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from triaxcal.cli import main
+from triaxcal.conventions.rotations import mounting
 from triaxcal.io.protocol import CHANNELS_10
-from triaxcal.rotations import mounting
 
 pytest.importorskip("wmm", reason="the geo extra (wmm-calculator)")
 

@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 from triaxcal import sim
+from triaxcal.capture.run import read_session
 from triaxcal.cli import main
-from triaxcal.io.capture import read_session
 
 
 @pytest.fixture(scope="module")
@@ -119,7 +119,7 @@ def test_capture_and_demo_count_the_84_poses_and_cover_the_sphere(demo):
     assert res["capture"]["poses_online"] == res["poses"] == 84
     assert res["capture"]["coverage_pct"] == res["coverage_pct"] == 100.0
     # the demo detected with nothing but the command line's defaults
-    from triaxcal.session.pose_options import default_settings
+    from triaxcal.detect.options import default_settings
 
     d = res["pose_detection"]
     assert {k: v for k, v in d.items() if k != "counts_per_g"} == {

@@ -72,7 +72,7 @@ def test_yaw_only_recovers_the_horizontal_calibration_and_headings(boat):
 def test_yaw_with_the_wmm_field(boat, monkeypatch):
     truth, rec, _ = boat
     mag, acc, _ = _poses(rec, truth)
-    f = tc.field.ExpectedField(
+    f = tc.ExpectedField(
         model="WMM2025", backend="test", date="2026-05-17", decimal_year=2026.37,
         lat_deg=47.37, lon_deg=8.54, alt_m=408.0, total_ut=FIELD_UT, horizontal_ut=H,
         north_ut=H, east_ut=0.0, down_ut=-V, inclination_deg=INC_DEG, declination_deg=0.0)

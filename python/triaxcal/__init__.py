@@ -4,10 +4,18 @@ Fits run in Rust (``triaxcal._core``), large ones with the GIL released; capture
 the CLI are Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the matrix *multiplies*.
 """
 
-from . import rotations, sim
+from . import sim
 from ._core import __version__
-from .calibration import Alignment, Calibration, SensorCalibration, TemperatureTerms
-from .compare import CalibrationDiff, compare
+from .calibration.diff import CalibrationDiff, compare
+from .calibration.file import Alignment, Calibration, SensorCalibration, TemperatureTerms
+from .calibration.parts import (
+    fold_asa,
+    part_from_center,
+    part_from_gyro_gains,
+    part_from_temperature,
+    part_from_tilt_rig,
+)
+from .conventions import rotations
 from .detect import (
     Pose,
     PoseDetection,
@@ -18,6 +26,7 @@ from .detect import (
     detect_still,
     still_intervals,
 )
+from .detect.session import PoseSettings, session_poses
 from .errors import CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError
 from .export import (
     adafruit_calib_json,
@@ -32,8 +41,7 @@ from .export import (
     px4_params_file,
     write_outputs,
 )
-from .field import ExpectedField, expected_field
-from .fit import (
+from .fit.ellipsoid import (
     MODELS,
     BatchFit,
     Descent,
@@ -47,7 +55,7 @@ from .fit import (
     grid_center,
     sphere_error,
 )
-from .fleet.autocal import AutoCalibration, autocalibrate
+from .fit.select import AutoFit, RobustFit, fit_auto, fit_robust
 from .io.logs import read_log
 from .io.recording import LogRecording, Stream
 from .io.tables import Table, read_table
@@ -59,7 +67,9 @@ from .methods.alignment import (
     heading_errors,
 )
 from .methods.allan import AllanAccumulator, AllanDeviation, allan
+from .methods.autocal import AutoCalibration, autocalibrate
 from .methods.bootstrap import BootstrapIntervals, bootstrap
+from .methods.field import ExpectedField, expected_field
 from .methods.gyro import (
     GyroBias,
     GyroGains,
@@ -87,16 +97,7 @@ from .methods.static import (
 )
 from .methods.temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
 from .methods.yaw import YawCalibration, fit_yaw
-from .parts import (
-    fold_asa,
-    part_from_center,
-    part_from_gyro_gains,
-    part_from_temperature,
-    part_from_tilt_rig,
-)
-from .poses import PoseSettings, session_poses
 from .report import QualityReport, plot_report, quality_report
-from .select import AutoFit, RobustFit, fit_auto, fit_robust
 
 __all__ = [
     "AllanAccumulator",

@@ -6,12 +6,12 @@ For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T
 * the residual ``|calibrated| - radius``: RMS in calibrated units and in % of the radius;
 * min / max / mean / std of the calibrated norms (the seeds' "descriptive statistics");
 * the standard error of every fitted coefficient (``offset_x``... ``offdiag_yz``);
-* coverage of the sphere: the share of the equal-area cells of :mod:`triaxcal.coverage` (the
+* coverage of the sphere: the share of the equal-area cells of :mod:`triaxcal.quality.coverage` (the
   measure ``capture``, ``demo`` and ``fit`` report too) that hold at least one calibrated
   direction, of every reading given (rejected ones too: coverage says where the board went);
 * the outliers rejected before the fit, by index;
 * warnings in plain language, each with what to do; the largest empty caps of the sphere
-  (found exactly, see :mod:`triaxcal._caps`) are named by their centre and radius ("no
+  (found exactly, see :mod:`triaxcal.quality.caps`) are named by their centre and radius ("no
   reading within 41 deg of (-0.94, -0.26, -0.20), 19 deg from -X towards -Y");
 * for a magnetometer: the field the World Magnetic Model expects where it was calibrated
   (total, horizontal, inclination, declination) beside the strength the readings show, its
@@ -36,14 +36,13 @@ from typing import Any
 
 import numpy as np
 
-from . import _options as opt
-from ._caps import largest_empty_caps
-from ._validate import as_points
-from .calibration import SensorCalibration
-from .coverage import Coverage, coverage_warning, sphere_cells
-from .coverage import coverage as shared_coverage
+from ._checks import options as opt
+from ._checks.arrays import as_points
+from .calibration.file import SensorCalibration
+from .conventions.units import per_unit
 from .errors import CalibrationError
-from .units import per_unit
+from .quality.caps import largest_empty_caps
+from .quality.coverage import Coverage, coverage, coverage_warning, sphere_cells
 
 __all__ = [
     "QualityReport",
@@ -74,23 +73,6 @@ def have_matplotlib() -> bool:
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n == 0, 1.0, n)
-
-
-def coverage(directions: Any) -> tuple[np.ndarray, float]:
-    """Hits per equal-area cell and the percentage of cells hit (the measure every command
-    reports: :func:`triaxcal.coverage.coverage`).
-
-    ``directions`` (N, 3) need not be unit length.
-
-    Returns
-    -------
-    counts : ndarray, shape (n_cells,)
-        Readings per cell, numbered as :class:`triaxcal.coverage.SphereCells`.
-    percent : float
-        Share of cells with at least one reading, in %.
-    """
-    cov = shared_coverage(directions)
-    return cov.counts, cov.percent
 
 
 def empty_regions(
@@ -326,7 +308,7 @@ def quality_report(
         Indices of readings rejected before the fit. Default: ``cal.stats["rejected"]`` when
         it fits the number of readings.
     model_reason : str, optional
-        Why the model was chosen (from :func:`triaxcal.select.fit_auto`).
+        Why the model was chosen (from :func:`triaxcal.fit.select.fit_auto`).
     temperature : float or array_like, optional
         Temperatures (deg C) for parts with temperature terms.
     intervals : BootstrapIntervals or dict, optional
@@ -372,7 +354,7 @@ def quality_report(
     radius = part.radius if part.radius is not None else float(np.mean(nk))
     res = nk - radius
     rms = float(np.sqrt(np.mean(res**2)))
-    cov = shared_coverage(cal_pts)  # of the session: rejected readings were visited too
+    cov = coverage(cal_pts)  # of the session: rejected readings were visited too
     holes = empty_regions(cal_pts[keep])
     stderr = dict(part.stats.get("stderr") or {})
     if fit is not None:
@@ -450,7 +432,7 @@ def context_lines(part: SensorCalibration) -> list[str]:
     al = part.alignment
     if al is not None:
         st = al.stats
-        from .rotations import rotation_angle_deg
+        from .conventions.rotations import rotation_angle_deg
 
         mnt = (f"{al.mounting} + {al.mounting_residual_deg:.2f} deg" if al.mounting
                else "not a right-angle mounting")
@@ -721,7 +703,7 @@ def report_figure(
     # coverage map: Lambert cylindrical equal-area (x = longitude, y = z), cells are rectangles
     ax = fig.add_subplot(gs[2, 1])
     cu = _unit(c)  # every reading, as the coverage number
-    counts, _ = coverage(cu)
+    counts = coverage(cu).counts
     import matplotlib.colors as mcolors
     from matplotlib.cm import ScalarMappable
     from matplotlib.patches import Patch, Rectangle

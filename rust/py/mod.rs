@@ -20,7 +20,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 /// Borrows an (N, 3) aligned, C-contiguous float64 array as points, without copying. (The
-/// Python facade converts anything else first: `triaxcal._validate.as_points`.)
+/// Python facade converts anything else first: `triaxcal._checks.arrays.as_points`.)
 fn points<'a>(arr: &'a PyReadonlyArray2<'_, f64>) -> PyResult<&'a [[f64; 3]]> {
     let shape = arr.shape();
     if shape[1] != 3 {

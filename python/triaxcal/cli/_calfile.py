@@ -8,7 +8,7 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration, SensorCalibration
 from ..errors import CalibrationError
 
 

@@ -22,8 +22,8 @@ def plain(text: str | None) -> str:
     """reST markup to plain text: ````x```` -> ``x``, ``:func:`~a.b``` -> ``b``,
     ``**x**`` -> ``x``.
 
-    >>> plain("``fit`` calls :func:`triaxcal.select.fit_robust`; see :class:`~tc.Calibration`")
-    'fit calls triaxcal.select.fit_robust; see Calibration'
+    >>> plain("``fit`` calls :func:`triaxcal.fit.select.fit_robust`; see :class:`~tc.Calibration`")
+    'fit calls triaxcal.fit.select.fit_robust; see Calibration'
     """
     if not text:
         return text or ""

@@ -35,7 +35,7 @@ def _limits_help() -> str:
 
 
 def register(subparsers: Any) -> None:
-    from ..session.fit import add_fit_options
+    from ..calibration.session import add_fit_options
 
     p = subparsers.add_parser(
         "batch", help=HELP, description=__doc__,

@@ -9,8 +9,8 @@ unit is the log's). ``--columns`` picks three columns by name or zero-based inde
 (``ax,ay,az`` or ``0,1,2``); by default the sensor's named columns, or the first three of a
 headerless file. ``--poses`` first reduces a raw time series to still-pose means, a pose
 ending when any sensor says the board moved, exactly as ``triaxcal capture`` counted them
-(:func:`triaxcal.poses.session_poses`). Outliers are rejected by the iterated 2-sigma rule on
-vector lengths (``--sigma 0`` disables).
+(:func:`triaxcal.detect.session.session_poses`). Outliers are rejected by the iterated
+2-sigma rule on vector lengths (``--sigma 0`` disables).
 
 A fit that did not converge, or whose readings cover too little of the sphere to determine
 its model, is not written: the command exits with status 2 and says what to record instead
@@ -25,11 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
-from ..errors import CalibrationError
-from ..io.files import check_output
-from ..session.field_options import add_field_options, alignment_for
-from ..session.fit import (
+from ..calibration.file import Calibration, SensorCalibration
+from ..calibration.session import (
     RECORD_INSTEAD,
     FitOutcome,
     _fields,
@@ -37,7 +34,10 @@ from ..session.fit import (
     fit_file,
     undetermined,
 )
-from ..session.source import autopilot_lines
+from ..calibration.source import autopilot_lines
+from ..calibration.surroundings import add_field_options, alignment_for
+from ..errors import CalibrationError
+from ..io.files import check_output
 
 
 def register(subparsers: Any) -> None:

@@ -21,10 +21,10 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_gyro_gains
 from ..errors import CalibrationError
 from ..io.tables import pick_columns, read_table
 from ..methods.gyro import gyro_gains
-from ..parts import part_from_gyro_gains
 from ._calfile import add_output_options, file_sha256, save_part
 
 HELP = "gyroscope gains from turns of a known angle, both ways about each axis (the seed's)"

@@ -16,17 +16,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration, SensorCalibration
+from ..calibration.session import add_fit_options, fit_file
+from ..calibration.source import load_source
+from ..detect.options import apply_settings, stored_settings
+from ..detect.session import pose_points
 from ..errors import CalibrationError
-from ..fit import MODELS
+from ..fit.ellipsoid import MODELS
 from ..io.files import check_output, write_file
 from ..io.logs import is_log
 from ..io.tables import pick_columns, read_table
-from ..poses import pose_points
 from ..report import QualityReport, context_lines, plot_report, quality_report
-from ..session.fit import add_fit_options, fit_file
-from ..session.pose_options import apply_settings, stored_settings
-from ..session.source import load_source
 from ._calfile import file_sha256
 from ._method_parts import summary_only, summary_text, tilt_points
 

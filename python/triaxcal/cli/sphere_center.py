@@ -26,13 +26,13 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_center
+from ..calibration.session import parse_radius
+from ..detect.options import add_pose_options, settings_from_args
+from ..detect.session import pose_points
 from ..errors import CalibrationError
-from ..fit import descend_center, fit_sphere, grid_center, sphere_error
+from ..fit.ellipsoid import descend_center, fit_sphere, grid_center, sphere_error
 from ..io.tables import pick_columns, read_table
-from ..parts import part_from_center
-from ..poses import pose_points
-from ..session.fit import parse_radius
-from ..session.pose_options import add_pose_options, settings_from_args
 from ._calfile import add_output_options, file_sha256, save_part
 
 HELP = "zero offset as the centre of a sphere of known radius (the seed's descent)"

@@ -24,12 +24,12 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_temperature
+from ..detect.options import add_pose_options, settings_from_args
+from ..detect.session import session_poses
 from ..errors import CalibrationError
 from ..io.tables import pick_columns, read_table
 from ..methods.temperature import fit_temperature
-from ..parts import part_from_temperature
-from ..poses import session_poses
-from ..session.pose_options import add_pose_options, settings_from_args
 from ._calfile import add_output_options, existing_part, file_sha256, save_part
 
 HELP = "gyro bias against temperature (the seed's linear trend; degree 1 to 3)"

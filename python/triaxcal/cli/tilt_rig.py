@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_tilt_rig
 from ..errors import CalibrationError
 from ..methods.static import TILT_KEYS, tilt_rig
-from ..parts import part_from_tilt_rig
 from ._calfile import add_output_options, file_sha256, save_part
 
 HELP = "accelerometer offsets and gains from a rig tilted by a known angle (the seed's rig)"

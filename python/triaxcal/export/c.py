@@ -7,8 +7,8 @@ Model: ``out = matrix * (raw - offset)`` (the matrix **multiplies**), with the p
 
 from __future__ import annotations
 
-from ..calibration import Calibration, SensorCalibration
-from ..units import per_unit
+from ..calibration.file import Calibration, SensorCalibration
+from ..conventions.units import per_unit
 from ._cgen import (
     _AX,
     _OFFD,

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration, SensorCalibration
 from ..errors import CalibrationError
 from ._cgen import (
     _AX,

@@ -5,13 +5,13 @@
   (``triaxcal batch``).
 * :mod:`~triaxcal.fleet.dask` (also importable as ``triaxcal.dask``) -- the same fits over
   Dask collections, on whatever scheduler the user has (needs ``pip install 'triaxcal[dask]'``).
-* :mod:`~triaxcal.fleet.autocal` -- free-living auto-calibration of wearable accelerometers
+* :mod:`~triaxcal.methods.autocal` -- free-living auto-calibration of wearable accelerometers
   (van Hees et al. 2014), streamed over recordings larger than memory.
 """
 
 from __future__ import annotations
 
-from .autocal import (
+from ..methods.autocal import (
     AutoCalibration,
     StillWindows,
     WindowStats,

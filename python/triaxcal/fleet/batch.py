@@ -1,9 +1,10 @@
 """Production line: fit every board's session, judge it against limits, write a record per board.
 
 Each board is fitted exactly as ``triaxcal fit SESSION.csv [options]`` fits one file (the same
-code: :func:`triaxcal.session.fit.fit_table`), so a board's calibration is the same whether it was
-fitted alone or in a batch of thousands. Then the board is judged against :class:`Limits`;
-the checks run in this order and every failed one is recorded (the first is the main reason):
+code: :func:`triaxcal.calibration.session.fit_table`), so a board's calibration is the same
+whether it was fitted alone or in a batch of thousands. Then the board is judged against
+:class:`Limits`; the checks run in this order and every failed one is recorded (the first is the
+main reason):
 
 =================  =============================================================================
 reason             fails when
@@ -57,8 +58,9 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration, SensorCalibration
 from ..errors import CalibrationError
+from ..quality.coverage import coverage
 
 __all__ = [
     "REASONS",
@@ -257,8 +259,8 @@ def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float 
     slow drift and to the slow ends of moves), largest axis; the median over poses."""
     if not args.poses:
         return None
-    from ..poses import sensor_columns, session_poses
-    from ..session.pose_options import settings_from_args
+    from ..detect.options import settings_from_args
+    from ..detect.session import sensor_columns, session_poses
 
     accel = None if "accel" in sensor_columns(table.names) else cols
     det, _ = session_poses(table.names, table.data, settings_from_args(args), accel=accel)
@@ -270,13 +272,6 @@ def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float 
     return float(np.median(noise)) if noise else None
 
 
-def _coverage(points: np.ndarray) -> float:
-    """Share (%) of the 24 equal-area cells hit: the capture status line's "sphere" figure."""
-    from ..io.capture import coverage
-
-    return 100.0 * coverage(points) if len(points) else 0.0
-
-
 def judge(
     table: Any,
     args: argparse.Namespace,
@@ -285,8 +280,8 @@ def judge(
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
+    from ..calibration.session import fit_table
     from ..io.tables import pick_columns
-    from ..session.fit import fit_table
 
     source = str(table.path)
     fails: list[tuple[str, str]] = []
@@ -308,13 +303,13 @@ def judge(
         pts = raw
         if args.poses:
             try:
-                from ..poses import pose_points
-                from ..session.pose_options import settings_from_args
+                from ..detect.options import settings_from_args
+                from ..detect.session import pose_points
 
                 pts, _ = pose_points(table, cols, settings_from_args(args))
             except CalibrationError:
                 pts = raw[:0]
-        cov = _coverage(pts)
+        cov = coverage(pts).percent
         measures["coverage_pct"] = cov
         if cov < limits.coverage_min_pct:
             fails.append(("coverage", f"the poses cover {cov:.0f} % of the sphere (limit "
@@ -322,7 +317,7 @@ def judge(
                           "orientations"))
         fails.append(("fit_failed", f"the fit failed: {exc}"))
     if part is not None:
-        cov = _coverage(part.apply(outcome.points))
+        cov = coverage(part.apply(outcome.points)).percent
         measures["coverage_pct"] = cov
         if cov < limits.coverage_min_pct:
             fails.append(("coverage", f"the poses cover {cov:.0f} % of the sphere (limit "
@@ -351,7 +346,7 @@ def fit_options(**overrides: Any) -> argparse.Namespace:
     >>> fit_options(model="full").model, fit_options().poses
     ('full', True)
     """
-    from ..session.fit import add_fit_options
+    from ..calibration.session import add_fit_options
 
     p = argparse.ArgumentParser(add_help=False)
     add_fit_options(p)

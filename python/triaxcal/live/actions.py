@@ -31,7 +31,7 @@ from ..errors import CalibrationError
 from .fitting import fit_argv, fit_session, pose_argv, session_to_fit
 
 if TYPE_CHECKING:
-    from ..calibration import Calibration
+    from ..calibration.file import Calibration
     from .state import LiveState
 
 __all__ = ["export_header", "fit_argv", "fit_session", "pose_argv", "reset", "run_cli", "save",
@@ -55,7 +55,7 @@ def run_cli(argv: list[str]) -> tuple[int, str, str]:
 
 def _save(state: LiveState) -> tuple[Calibration, Path, str]:
     """``triaxcal fit`` of each sensor into calibration.json; raises with its messages."""
-    from ..calibration import Calibration
+    from ..calibration.file import Calibration
 
     path = state.out_dir / "calibration.json"
     if not state.session.exists():

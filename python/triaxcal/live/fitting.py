@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 from ..errors import CalibrationError
 
 if TYPE_CHECKING:
-    from ..poses import PoseSettings
-    from ..session.fit import FitOutcome
+    from ..calibration.session import FitOutcome
+    from ..detect.session import PoseSettings
     from .options import LiveOptions
 
 __all__ = ["FitSource", "fit_argv", "fit_session", "pose_argv", "session_to_fit"]
@@ -38,7 +38,7 @@ class FitSource(Protocol):
 def pose_argv(settings: PoseSettings) -> list[str]:
     """The pose options (``--window``, ``--accel-threshold``...) that describe ``settings``,
     those that differ from the defaults (the inverse of the CLI's ``settings_from_args``)."""
-    from ..session.pose_options import default_settings
+    from ..detect.options import default_settings
 
     d = default_settings()
     out: list[str] = []
@@ -102,8 +102,8 @@ def fit_session(state: FitSource, output: str | None = None) -> dict[str, FitOut
     """Fit every sensor of the session as ``triaxcal fit`` does; ``{sensor: FitOutcome}``.
 
     Raises :class:`CalibrationError` when no sensor could be fitted (the messages of each)."""
+    from ..calibration.session import fit_file
     from ..cli import build_parser
-    from ..session.fit import fit_file
 
     if not state.session.exists():
         raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")

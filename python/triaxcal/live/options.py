@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from ..detect.session import PoseSettings
 from ..errors import CalibrationError
-from ..fit import MODELS
-from ..poses import PoseSettings
+from ..fit.ellipsoid import MODELS
 
 __all__ = ["ACCEL_LIMITS", "SENSOR_COLUMNS", "LiveOptions"]
 
@@ -35,12 +35,12 @@ _MC_HELP = {"gaps": "empty regions of the sphere (MotionCal's 100)",
             "fit_error": "RMS of |calibrated| - radius, in % of the radius"}
 
 def _rects() -> list[list[float]]:
-    from ..coverage import sphere_cells
+    from ..quality.coverage import sphere_cells
 
     return [[round(v, 6) for v in r] for r in sphere_cells().rectangles()]
 
 
-#: The shared coverage cells (``triaxcal.coverage``) as (lon_lo, lon_hi deg, z_lo, z_hi).
+#: The shared coverage cells (``triaxcal.quality.coverage``) as (lon_lo, lon_hi deg, z_lo, z_hi).
 _RECTS = _rects()
 
 _TRAIL_HZ = 25.0
@@ -55,7 +55,7 @@ class LiveOptions:
     ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius`` (as
     ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
     ``detection`` (the pose detection of ``capture`` and ``fit --poses``,
-    :class:`~triaxcal.poses.PoseSettings`; ``None``: the command line's defaults).
+    :class:`~triaxcal.detect.session.PoseSettings`; ``None``: the command line's defaults).
     ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
     the displayed rates. ``mag_buffer`` is the size of the magnetometer's
     buffer of well-spread samples; ``refresh_hz`` how often the background thread refits and
@@ -77,8 +77,8 @@ class LiveOptions:
     send_timeout_s: float = 3.0
 
     def __post_init__(self) -> None:
+        from ..calibration.session import parse_radius
         from ..export._cgen import _ident
-        from ..session.fit import parse_radius
 
         if self.model not in (*MODELS, "auto"):
             raise CalibrationError(f"model must be one of {(*MODELS, 'auto')}, got {self.model!r}")

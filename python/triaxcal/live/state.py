@@ -1,6 +1,6 @@
 """The live state: fed by the capture thread, refitted in the background, read by the page.
 
-The capture loop (:func:`triaxcal.io.capture.capture`) hands every batch of records to
+The capture loop (:func:`triaxcal.capture.run.capture`) hands every batch of records to
 :meth:`LiveState.on_records`, which only updates bounded structures:
 
 * the accelerometer's still poses, found online by a :class:`~triaxcal.detect.PoseDetector`
@@ -11,7 +11,7 @@ The capture loop (:func:`triaxcal.io.capture.capture`) hands every batch of reco
 * thinned trails of the newest readings (25 per second, 10 s) and the stream's counters.
 
 A background thread (:meth:`LiveState.start`) refits several times a second what has arrived
-with the same Rust fits and options as ``triaxcal fit`` (:func:`triaxcal.select.fit_robust`:
+with the same Rust fits and options as ``triaxcal fit`` (:func:`triaxcal.fit.select.fit_robust`:
 model choice by BIC, 2-sigma outlier rejection) and publishes one JSON document
 (:meth:`LiveState.document`, served as ``GET /api/state``) and the thinned point sets
 (:meth:`LiveState.points`). Nothing grows with the length of the capture except one small
@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from ..capture.run import _LivePoses
 from ..errors import CalibrationError
-from ..io.capture import _LivePoses
 from .options import (
     _MC_HELP,
     _MC_NAMES,
@@ -107,7 +107,7 @@ class LiveState:
         self.protocol = protocol
         self.port = port
         raw = protocol == "raw"
-        from ..session.pose_options import default_settings
+        from ..detect.options import default_settings
 
         self.detection = opts.detection if opts.detection is not None else default_settings()
         #: nominal accelerometer counts per g (for display until the data decide it)
@@ -121,7 +121,7 @@ class LiveState:
                 self.cols[sensor] = c
         if "accel" not in self.cols and len(names) >= 3:
             self.cols["accel"] = [0, 1, 2]
-        from ..session.fit import parse_radius
+        from ..calibration.session import parse_radius
 
         self.accel_radius, self.accel_unit = parse_radius(opts.accel_radius, "accel")
         if opts.mag_radius is not None:
@@ -258,7 +258,7 @@ class LiveState:
 
     # ----------------------------------------------------------------------- fitting
     def _fit_live(self, sensor: str, pts: np.ndarray) -> _Fit:
-        from ..select import fit_robust
+        from ..fit.select import fit_robust
 
         o = self.options
         radius = self.accel_radius if sensor == "accel" else self.mag_radius
@@ -360,7 +360,7 @@ class LiveState:
         return d
 
     def _build(self, poses: np.ndarray) -> tuple[dict[str, Any], dict[str, Any]]:
-        from ..coverage import suggest_turn
+        from ..quality.coverage import suggest_turn
 
         now = time.monotonic()
         with self._lock:
@@ -496,7 +496,7 @@ class LiveState:
         """Coverage, the biggest empty cap and the quality checks of one sensor; recomputed
         when its points or fit changed, at most 4 times a second (the cap search is the
         costly part)."""
-        from ..coverage import coverage, sphere_cells
+        from ..quality.coverage import coverage, sphere_cells
         from ..report import direction_words
 
         now = time.monotonic()

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points
+from .._checks.arrays import as_points
 from ..errors import CalibrationError
 
 __all__ = ["YawCalibration", "fit_yaw"]
@@ -121,7 +121,7 @@ class YawCalibration:
 
     def part(self, **kw: Any) -> Any:
         """A :class:`~triaxcal.SensorCalibration` (model ``"yaw"``) with these numbers."""
-        from ..calibration import SensorCalibration
+        from ..calibration.file import SensorCalibration
 
         radius = (math.hypot(self.horizontal, self.vertical) if self.vertical is not None
                   else self.horizontal)

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from .detect import PoseDetection, PoseDetector, detect_poses
-from .errors import CalibrationError
+from ..errors import CalibrationError
+from . import PoseDetection, PoseDetector, detect_poses
 
 #: Last column of a session whose rows are the board's pose means (``capture --board-poses``):
 #: the samples each mean averages.

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from .errors import CalibrationError
+from ..errors import CalibrationError
 
 __all__ = [
     "DEVICE_COUNTS_PER_UNIT",

@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_points
-from .errors import CalibrationError
+from .._checks.arrays import as_points
+from ..errors import CalibrationError
 
 __all__ = [
     "LOW_COVERAGE_PCT",

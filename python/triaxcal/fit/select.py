@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_choice, as_count, as_points, as_real
-from .errors import CalibrationError
-from .fit import (  # model choice lives beside the fit, which dispatches model="auto" to it
+from .._checks.arrays import as_choice, as_count, as_points, as_real
+from ..errors import CalibrationError
+from .ellipsoid import (  # model choice lives beside the fit, which dispatches model="auto" to it
     MODELS,
     AutoFit,
     EllipsoidFit,

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from . import _core
-from ._validate import (
+from .. import _core
+from .._checks.arrays import (
     as_choice,
     as_count,
     as_flag,
@@ -29,7 +29,7 @@ from ._validate import (
     as_vector,
     require_radius,
 )
-from .errors import CalibrationError
+from ..errors import CalibrationError
 
 __all__ = [
     "MODELS",
@@ -601,7 +601,7 @@ def fit_auto(
     Examples
     --------
     >>> import numpy as np, triaxcal as tc
-    >>> from triaxcal.select import fit_auto
+    >>> from triaxcal.fit.select import fit_auto
     >>> rng = np.random.default_rng(1)
     >>> u = rng.normal(size=(400, 3)); u /= np.linalg.norm(u, axis=1, keepdims=True)
     >>> raw = u / [1.1, 0.9, 1.0] + 0.01 * rng.normal(size=(400, 3))

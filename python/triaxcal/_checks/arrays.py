@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CalibrationError, NonFiniteError
+from ..errors import CalibrationError, NonFiniteError
 
 
 def as_points(points: Any, name: str = "points", min_rows: int = 0) -> np.ndarray:

@@ -7,7 +7,7 @@ clipped, rounded or coerced silently: a string is not a number (``"3"`` is refus
 not a number (``True`` is refused), a float is not a whole number (``2.5`` is refused where a
 count of samples is wanted; ``3.0`` is accepted as 3), a complex number is refused.
 
-Array data (readings, time stamps) are checked by :mod:`triaxcal._validate`.
+Array data (readings, time stamps) are checked by :mod:`triaxcal._checks.arrays`.
 
 >>> number(0.5, "k", gt=0)
 0.5
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CalibrationError
+from ..errors import CalibrationError
 
 __all__ = [
     "choice",

@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Alignment, Calibration, SensorCalibration
+from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
-from ..field import ExpectedField, expected_field, parse_location, strength_check
-from ..units import UNITS, unit_factor
+from ..methods.field import ExpectedField, expected_field, parse_location, strength_check
+from .file import Alignment, Calibration, SensorCalibration
 
 __all__ = ["add_field_options", "alignment_for", "expected_from_args", "measured_strength_ut",
            "yaw_part"]
@@ -130,14 +130,14 @@ def yaw_part(args: argparse.Namespace, src: Any, expected: ExpectedField | None,
         acal = _accel_part(args)
         if acal is not None:
             accel = acal.apply(accel)
-    from ..calibration import _norm_stats
-    from ..report import coverage
+    from ..quality.coverage import coverage
+    from .file import _norm_stats
 
     y = fit_yaw(mag, accel=accel, field=expected, raw_unit=raw_unit)
     cal = y.apply(mag)
     return y.part(input_sha256=src.sha256, source=str(src.path),
                   extra_stats={"columns": src.columns, "n_input": len(mag),
-                               "coverage_pct": coverage(cal)[1],
+                               "coverage_pct": coverage(cal).percent,
                                "norms": _norm_stats(np.linalg.norm(cal, axis=1))})
 
 

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from .calibration import SENSORS, Calibration, SensorCalibration
-from .errors import CalibrationError
-from .units import UNITS, unit_factor
+from ..conventions.units import UNITS, unit_factor
+from ..errors import CalibrationError
+from .file import SENSORS, Calibration, SensorCalibration
 
 __all__ = ["CalibrationDiff", "CoefficientChange", "PartDiff", "compare"]
 

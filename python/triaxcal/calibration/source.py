@@ -69,9 +69,9 @@ def file_sha256(path: Path) -> str:
 def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
     """Readings of ``sensor`` from a table already read (:func:`triaxcal.io.tables.read_table`):
     the table half of :func:`load_source` (``triaxcal batch`` fits each board so)."""
+    from ..detect.options import settings_from_args
+    from ..detect.session import pose_points
     from ..io.tables import pick_columns
-    from ..poses import pose_points
-    from .pose_options import settings_from_args
 
     cols = pick_columns(table, getattr(args, "columns", None), sensor)
     pose_stats: dict[str, Any] = {}
@@ -131,8 +131,8 @@ def _log_pose_points(
     it is the sensor fitted) says the vehicle moved."""
     from dataclasses import replace
 
-    from ..poses import SENSOR_NAMES, session_poses
-    from .pose_options import settings_from_args
+    from ..detect.options import settings_from_args
+    from ..detect.session import SENSOR_NAMES, session_poses
 
     acc = rec.stream("accel")
     per_g = _G.get(acc.unit)

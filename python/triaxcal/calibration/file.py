@@ -20,8 +20,8 @@ summaries (newest first, at most :data:`MAX_PREVIOUS`): when it was replaced, th
 units, standard errors and provenance -- enough for ``triaxcal diff`` to say what changed.
 
 A magnetometer part may also hold the field the World Magnetic Model expects where it was
-calibrated (``expected_field``, :class:`triaxcal.field.ExpectedField`) and its alignment with
-the accelerometer (``alignment``, :class:`Alignment`: ``v_accel = rotation @ v_mag`` for
+calibrated (``expected_field``, :class:`triaxcal.methods.field.ExpectedField`) and its alignment
+with the accelerometer (``alignment``, :class:`Alignment`: ``v_accel = rotation @ v_mag`` for
 calibrated readings; :meth:`SensorCalibration.apply_aligned`).
 """
 
@@ -39,13 +39,13 @@ from typing import Any
 
 import numpy as np
 
-from . import _schema
-from ._core import __version__
-from ._validate import as_points
-from .errors import CalibrationError
-from .field import ExpectedField
-from .io.files import read_bounded, write_file
-from .rotations import Alignment
+from .._checks.arrays import as_points
+from .._core import __version__
+from ..errors import CalibrationError
+from ..io.files import read_bounded, write_file
+from ..methods.field import ExpectedField
+from . import schema as _schema
+from .alignment import Alignment
 
 __all__ = [
     "KNOWN_MODELS",
@@ -62,7 +62,7 @@ SCHEMA_NAME = "triaxcal.calibration"
 SCHEMA_VERSION = 1
 SCHEMA = f"{SCHEMA_NAME}/{SCHEMA_VERSION}"
 SENSORS = _schema.SENSORS
-#: Model names a part may carry (see :mod:`triaxcal._schema`).
+#: Model names a part may carry (see :mod:`triaxcal.calibration.schema`).
 KNOWN_MODELS = _schema.KNOWN_MODELS
 
 #: Most summaries of replaced calibrations a part keeps (newest first).
@@ -744,8 +744,8 @@ class Calibration:
     def load(cls, path: str | os.PathLike[str]) -> Calibration:
         """Read a calibration file written by :meth:`save` (or by ``triaxcal fit``).
 
-        Every value is validated (see :mod:`triaxcal._schema`): numbers are finite numbers,
-        the matrix is invertible, the model is a known name, text is bounded and free of
+        Every value is validated (see :mod:`triaxcal.calibration.schema`): numbers are finite
+        numbers, the matrix is invertible, the model is a known name, text is bounded and free of
         control characters. Anything else -- a folder, a file that is not UTF-8 JSON, one
         larger than 64 MB, nested too deeply -- raises :class:`CalibrationError`.
         """

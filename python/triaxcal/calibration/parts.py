@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from .calibration import SensorCalibration, TemperatureTerms
-from .errors import CalibrationError
+from ..errors import CalibrationError
+from .file import SensorCalibration, TemperatureTerms
 
 __all__ = [
     "fold_asa",
@@ -283,7 +283,7 @@ def fold_asa(part: SensorCalibration, asa: Any) -> SensorCalibration:
     >>> raw.apply([[40.0 * 1.0, 0, 0]]).round(9).tolist()   # 40 counts read 50 adjusted: 0 uT
     [[0.0, 0.0, 0.0]]
     """
-    from .io.akm import asa_factors
+    from ..io.akm import asa_factors
 
     k = asa_factors(asa)
     if part.stats.get("asa") is not None:

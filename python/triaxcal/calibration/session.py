@@ -16,27 +16,27 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import SENSORS, SensorCalibration
-from ..coverage import coverage, coverage_warning
+from ..conventions.units import UNITS, implausible_radius, unit_factor
+from ..detect.options import add_pose_options
 from ..errors import CalibrationError
-from ..field import ExpectedField
-from ..fit import MODELS
+from ..fit.ellipsoid import MODELS
 from ..io.akm import apply_asa, asa_factors
 from ..io.tables import SENSOR_COLUMNS, Table, pick_columns, read_table
-from ..parts import fold_asa
-from ..units import UNITS, implausible_radius, unit_factor
-from .field_options import (
-    expected_from_args,
-    field_stats,
-    yaw_part,
-)
-from .pose_options import add_pose_options
+from ..methods.field import ExpectedField
+from ..quality.coverage import coverage, coverage_warning
+from .file import SENSORS, SensorCalibration
+from .parts import fold_asa
 from .source import (
     Source,
     add_source_options,
     autopilot_stats,
     load_source,
     table_source,
+)
+from .surroundings import (
+    expected_from_args,
+    field_stats,
+    yaw_part,
 )
 
 __all__ = ["SENSOR_COLUMNS", "Table", "parse_radius", "pick_columns", "read_table"]
@@ -212,7 +212,7 @@ class FitOutcome:
 def fit_file(args: argparse.Namespace, *, table: Table | None = None) -> FitOutcome:
     """Read ``args.data`` (or take ``table``, already read), pick columns, optionally reduce
     to poses, fit robustly."""
-    from ..select import fit_robust
+    from ..fit.select import fit_robust
 
     sensor = args.sensor or "accel"
     notes: list[str] = []

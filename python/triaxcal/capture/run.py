@@ -7,11 +7,11 @@ as received (integers for counts). Rows are written whole, flushed after every b
 ``fsync``-ed at least once a second; Ctrl-C (SIGINT) ends the capture between two batches.
 
 While capturing, an online :class:`~triaxcal.detect.PoseDetector` with every sensor the
-session has (:class:`~triaxcal.poses.PoseSettings`: the same detection as ``triaxcal fit
+session has (:class:`~triaxcal.detect.session.PoseSettings`: the same detection as ``triaxcal fit
 --poses`` and ``report`` run on the saved file) registers still poses; each one rings the
 terminal bell, and a status line shows the samples, the poses, the share of the sphere of
-directions covered so far (:mod:`triaxcal.coverage`, the measure every command uses) and which
-way to turn the board next.
+directions covered so far (:mod:`triaxcal.quality.coverage`, the measure every command uses) and
+which way to turn the board next.
 
 When the board finds the poses itself (a :class:`~triaxcal.io.serial.SerialReader` with
 ``board_poses``: the firmware's mode ``S``), every record is one pose and is written as one
@@ -36,15 +36,14 @@ from typing import Any, BinaryIO, TextIO
 
 import numpy as np
 
-from ..coverage import coverage as _coverage
-from ..coverage import sphere_cells, suggest_turn
 from ..detect import Pose, PoseDetector
+from ..detect.session import HEAD_ROWS, POSE_N_COLUMN, PoseSettings, ResolvedPoses
 from ..errors import CalibrationError
-from ..poses import HEAD_ROWS, POSE_N_COLUMN, PoseSettings, ResolvedPoses
-from .board_poses import BoardPoseSettings
-from .files import os_error_message
-from .protocol import CHANNELS_7, CHANNELS_10
-from .serial import ReaderStats, Record, SerialReader
+from ..io.board_poses import BoardPoseSettings
+from ..io.files import os_error_message
+from ..io.protocol import CHANNELS_7, CHANNELS_10
+from ..io.serial import ReaderStats, Record, SerialReader
+from ..quality.coverage import coverage, suggest_turn
 
 __all__ = [
     "POSE_N_COLUMN",
@@ -53,10 +52,7 @@ __all__ = [
     "SessionWriter",
     "capture",
     "channel_names",
-    "coverage",
     "read_session",
-    "sphere_cells",
-    "suggest_turn",
 ]
 
 
@@ -285,34 +281,12 @@ def read_session(path: Any) -> tuple[tuple[str, ...], np.ndarray]:
     Rows that are not whole (a row cut by a power cut or a full disk) are skipped; see
     :func:`triaxcal.io.tables.read_table` for a reader that reports them.
     """
-    from .tables import read_table
+    from ..io.tables import read_table
 
     table = read_table(path, skip_bad_lines=True, allow_empty=True)
     if not table.names or table.names[0] != "t":
         raise CalibrationError(f"{path} is not a session CSV: its first column must be 't'")
     return table.names, table.data
-
-
-# ------------------------------------------------------------------------- sphere coverage
-
-
-def coverage(points: Any, *, center: Any = None) -> float:
-    """Fraction (0..1) of the sphere covered by ``points``: the shared measure of
-    :func:`triaxcal.coverage.coverage` (equal-area cells hit), as the status line shows it.
-
-    ``points`` (N, 3) are readings (e.g. pose means of the accelerometer); their directions
-    from ``center`` (default: the origin, fine for raw counts whose offset is small compared
-    with the radius) pick the cells.
-
-    Examples
-    --------
-    >>> coverage([[0, 0, 1], [0, 0, -1]])
-    0.08333333333333333
-    """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(pts) == 0:
-        return 0.0
-    return _coverage(pts, center=center).fraction
 
 
 # --------------------------------------------------------------------------------- capture
@@ -328,7 +302,7 @@ class CaptureResult:
     ``"duration"``, ``"stop"``, ``"interrupt"``; ``elapsed_s``; ``stats`` the reader's
     counters; ``events`` the (kind, message) pairs the reader reported; ``detection`` the pose
     settings with the values the data decided (counts per g, sample rate), which replay the
-    same poses on the saved session (:func:`triaxcal.poses.session_poses`); ``thresholds``
+    same poses on the saved session (:func:`triaxcal.detect.session.session_poses`); ``thresholds``
     each sensor's threshold in its raw units (learnt ones as learnt). When the board found the
     poses (``board_poses``), each pose is one row of the session (``start``, ``end`` are its
     row index and the next; ``n`` the samples the board averaged), ``detection`` is None and
@@ -452,14 +426,14 @@ def capture(
         Channels of the accelerometer, for pose detection and coverage (default: the ones
         named ``ax ay az``, else the first three).
     units_per_g, window, threshold_g, hold_windows
-        Shorthands for ``detection`` (:class:`~triaxcal.poses.PoseSettings` ``counts_per_g``
-        -- default: from the first readings --, ``window``, ``accel_threshold_g`` and
-        ``hold_windows``: a pose is registered, and the bell rings, once it has been still for
+        Shorthands for ``detection`` (:class:`~triaxcal.detect.session.PoseSettings`
+        ``counts_per_g`` -- default: from the first readings --, ``window``, ``accel_threshold_g``
+        and ``hold_windows``: a pose is registered, and the bell rings, once it has been still for
         that many windows), used when ``detection`` is not given.
     detection : PoseSettings, optional
         Pose detection: a pose ends when any sensor of the session says the board moved (the
         same settings give the same poses in ``triaxcal fit --poses`` on the saved file).
-        The detector starts once the first :data:`~triaxcal.poses.HEAD_ROWS` rows are in
+        The detector starts once the first :data:`~triaxcal.detect.session.HEAD_ROWS` rows are in
         (they fix the counts per g and, for a hold-off, the sample rate).
     progress : text stream or None
         Where the status line goes (``None``: silent).
@@ -587,7 +561,8 @@ def capture(
         registered = live.det.poses[:len(registered)]
     if isinstance(live, _BoardPoses):
         live.watch()
-    cov = coverage(live.points(registered)) if live is not None and registered else 0.0
+    cov = (coverage(live.points(registered)).fraction if live is not None and registered
+           else 0.0)
     status.line(_status_text(writer.rows, registered, live, last, reader, poses, samples),
                 force=True)
     status.end()
@@ -738,7 +713,7 @@ def _status_text(
     want_samples: int | None,
 ) -> str:
     pts = live.points(registered) if live is not None else np.zeros((0, 3))
-    cov = coverage(pts) if len(pts) else 0.0
+    cov = coverage(pts).fraction
     s = f"{rows}" + (f"/{want_samples}" if want_samples else "") + " samples"
     s += f"  {len(registered)}" + (f"/{want_poses}" if want_poses else "") + " poses"
     s += f"  coverage {100 * cov:.0f} %"

@@ -32,8 +32,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from . import _schema
-from .errors import CalibrationError
+from ..calibration import schema as _schema
+from ..errors import CalibrationError
 
 __all__ = [
     "STRENGTH_TOLERANCE",

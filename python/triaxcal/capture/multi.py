@@ -1,7 +1,7 @@
 """Capture from several boards at once (a production rig with a USB hub): one thread per port.
 
 Each port gets its own :class:`~triaxcal.io.serial.SerialReader` and its own
-:func:`~triaxcal.io.capture.capture` running in a thread, writing its own session CSV, so
+:func:`~triaxcal.capture.run.capture` running in a thread, writing its own session CSV, so
 everything :func:`capture` promises holds per board: rows written as they arrive, a pulled
 cable reported and waited for (the other boards carry on; the board that comes back resumes
 into the same file), nothing already written ever lost. A board that cannot be started (port
@@ -42,8 +42,8 @@ from typing import Any, TextIO
 import serial
 
 from ..errors import CalibrationError
-from .capture import CaptureResult, capture
-from .serial import SerialReader
+from ..io.serial import SerialReader
+from .run import CaptureResult, capture
 
 __all__ = [
     "ID_BYTE",
@@ -130,7 +130,7 @@ class BoardCapture:
 
     ``board_id`` names the session file ``<out_dir>/<board_id>.csv``; ``id_source`` is
     ``"serial"`` (the board answered ``I``) or ``"port"`` (fallback, or ``query_id=False``);
-    ``result`` the :class:`~triaxcal.io.capture.CaptureResult` (``None`` when the capture could
+    ``result`` the :class:`~triaxcal.capture.run.CaptureResult` (``None`` when the capture could
     not start); ``error`` the reason it could not (``None`` otherwise).
     """
 

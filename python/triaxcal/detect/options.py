@@ -1,6 +1,6 @@
 """The pose-detection options shared by ``capture``, ``fit --poses``, ``report`` and ``demo``.
 
-One argument group, one conversion to :class:`triaxcal.poses.PoseSettings`: the commands
+One argument group, one conversion to :class:`triaxcal.detect.session.PoseSettings`: the commands
 cannot drift apart, and the demo uses nothing a user cannot pass.
 """
 
@@ -10,7 +10,7 @@ import argparse
 import math
 from typing import Any
 
-from ..poses import HEAD_ROWS, PoseSettings
+from .session import HEAD_ROWS, PoseSettings
 
 
 def _positive_float(text: str) -> float:
