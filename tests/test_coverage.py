@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import triaxcal
 import triaxcal as tc
+from triaxcal.quality.bounds import LOW_COVERAGE_PCT
 from triaxcal.quality.coverage import (
-    LOW_COVERAGE_PCT,
     N_CELLS,
     coverage,
     coverage_warning,

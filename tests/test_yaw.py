@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import triaxcal as tc
+from triaxcal.calibration.parts import part_from_yaw
 from triaxcal.sim import Script, SimIMU, rotvec_to_matrix
 
 FIELD_UT, INC_DEG = 48.4, 63.5
@@ -64,7 +65,7 @@ def test_yaw_only_recovers_the_horizontal_calibration_and_headings(boat):
     tilted = tc.heading_errors(a2, y.apply(m2), att2)
     assert _rms(tilted) < y.tilt_heading_deg
     assert any("5 % mismatch" in t for t in y.limits)
-    part = y.part(source="sim")
+    part = part_from_yaw(y, source="sim")
     assert part.model == "yaw" and part.stats["yaw"]["vertical"] == pytest.approx(V)
     assert tc.Calibration.from_json(tc.Calibration(mag=part).to_json()).mag == part
 

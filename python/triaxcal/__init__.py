@@ -6,8 +6,10 @@ the CLI are Python. Calibrated readings are ``(raw - offset) @ matrix.T``: the m
 
 from . import sim
 from ._core import __version__
+from .calibration.alignment import Alignment
 from .calibration.diff import CalibrationDiff, compare
-from .calibration.file import Alignment, Calibration, SensorCalibration, TemperatureTerms
+from .calibration.file import Calibration
+from .calibration.part import SensorCalibration, TemperatureTerms
 from .calibration.parts import (
     fold_asa,
     part_from_center,

@@ -5,6 +5,7 @@
 //! and builds the `EllipsoidFit`, for the sake of small calls.
 
 mod allan;
+mod bounds;
 mod errors;
 mod fit;
 
@@ -254,5 +255,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_batch, m)?)?;
     m.add_function(wrap_pyfunction!(apply, m)?)?;
     m.add_class::<allan::AllanStream>()?;
+    bounds::add(m)?;
     Ok(())
 }

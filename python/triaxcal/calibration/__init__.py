@@ -10,19 +10,9 @@ changed between two calibrations, and a recorded session fitted into a part.
   ``triaxcal fit`` fits it.
 """
 
-from .file import (
-    KNOWN_MODELS,
-    MAX_PREVIOUS,
-    SCHEMA,
-    SCHEMA_NAME,
-    SCHEMA_VERSION,
-    SENSORS,
-    Alignment,
-    Calibration,
-    SensorCalibration,
-    TemperatureTerms,
-    sha256_points,
-)
+from .alignment import Alignment
+from .file import KNOWN_MODELS, SCHEMA, SCHEMA_NAME, SCHEMA_VERSION, SENSORS, Calibration
+from .part import MAX_PREVIOUS, SensorCalibration, TemperatureTerms, sha256_points
 
 __all__ = [
     "KNOWN_MODELS",

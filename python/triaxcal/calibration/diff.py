@@ -34,7 +34,8 @@ import numpy as np
 
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
-from .file import SENSORS, Calibration, SensorCalibration
+from .file import SENSORS, Calibration
+from .part import SensorCalibration
 
 __all__ = ["CalibrationDiff", "CoefficientChange", "PartDiff", "compare"]
 

@@ -19,7 +19,9 @@ temperature model           ``offset = offset(T_ref)``, ``offset_poly`` the drif
 ==========================  ==========================================================
 
 Every part records the method and its inputs in ``stats`` (``method``, ...), so that a file
-says how each number was made.
+says how each number was made, and passes the validity gate (:mod:`triaxcal.calibration.gate`):
+a part the gate refuses raises :class:`~triaxcal.calibration.gate.InvalidCalibrationError`
+unless ``force=True``, which returns it marked ``valid=False`` with the reasons.
 """
 
 from __future__ import annotations
@@ -31,9 +33,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError
-from .file import SensorCalibration, TemperatureTerms
+from .gate import check, judged
+from .part import SensorCalibration, TemperatureTerms
 
 __all__ = [
+    "part_from_yaw",
     "fold_asa",
     "part_from_center",
     "part_from_gyro_gains",
@@ -60,6 +64,7 @@ def part_from_center(
     stats: Mapping[str, Any] | None = None,
     source: str | None = None,
     input_sha256: str | None = None,
+    force: bool = False,
 ) -> SensorCalibration:
     """A part from the centre of a sphere of known radius (the seed's zero offset).
 
@@ -114,9 +119,10 @@ def part_from_center(
     st: dict[str, Any] = {"method": method, "radius_raw": r}
     if stats:
         st.update(stats)
-    return SensorCalibration(offset=c, matrix=matrix, raw_unit=raw_unit, unit=out_unit,
-                             radius=None if scale_to is None else float(scale_to), model=model,
-                             stats=st, source=source, input_sha256=input_sha256)
+    return gated(SensorCalibration(offset=c, matrix=matrix, raw_unit=raw_unit, unit=out_unit,
+                                   radius=None if scale_to is None else float(scale_to),
+                                   model=model, stats=st, source=source,
+                                   input_sha256=input_sha256), force=force)
 
 
 def part_from_tilt_rig(
@@ -126,6 +132,7 @@ def part_from_tilt_rig(
     stats: Mapping[str, Any] | None = None,
     source: str | None = None,
     input_sha256: str | None = None,
+    force: bool = False,
 ) -> SensorCalibration:
     """An accelerometer part from :func:`~triaxcal.tilt_rig`: ``offset`` and the per-axis
     gains (g per raw unit, multiply) on the diagonal; calibrated readings in g.
@@ -153,9 +160,10 @@ def part_from_tilt_rig(
     }
     if stats:
         st.update(stats)
-    return SensorCalibration(offset=_finite3(rig.offset, "offset"), matrix=np.diag(gain),
-                             raw_unit=raw_unit, unit="g", radius=1.0, model="axis", stats=st,
-                             source=source, input_sha256=input_sha256)
+    return gated(SensorCalibration(offset=_finite3(rig.offset, "offset"), matrix=np.diag(gain),
+                                   raw_unit=raw_unit, unit="g", radius=1.0, model="axis",
+                                   stats=st, source=source, input_sha256=input_sha256),
+                 "accel", force=force)
 
 
 def part_from_gyro_gains(
@@ -165,6 +173,7 @@ def part_from_gyro_gains(
     stats: Mapping[str, Any] | None = None,
     source: str | None = None,
     input_sha256: str | None = None,
+    force: bool = False,
 ) -> SensorCalibration:
     """A gyroscope part from :func:`~triaxcal.gyro_gains`: calibrated rates in deg/s.
 
@@ -200,9 +209,10 @@ def part_from_gyro_gains(
     }
     if stats:
         st.update(stats)
-    return SensorCalibration(offset=_finite3(gains.offset, "offset"), matrix=np.diag(1.0 / gain),
-                             raw_unit=raw_unit, unit="deg/s", model="axis", stats=st,
-                             source=source, input_sha256=input_sha256)
+    return gated(SensorCalibration(offset=_finite3(gains.offset, "offset"),
+                                   matrix=np.diag(1.0 / gain), raw_unit=raw_unit, unit="deg/s",
+                                   model="axis", stats=st, source=source,
+                                   input_sha256=input_sha256), "gyro", force=force)
 
 
 def part_from_temperature(
@@ -213,6 +223,7 @@ def part_from_temperature(
     stats: Mapping[str, Any] | None = None,
     source: str | None = None,
     input_sha256: str | None = None,
+    force: bool = False,
 ) -> SensorCalibration:
     """A part with the temperature terms of ``model`` (:func:`~triaxcal.fit_temperature`).
 
@@ -249,16 +260,39 @@ def part_from_temperature(
     if base is None:
         part = SensorCalibration.from_temperature_model(
             model, raw_unit=raw_unit, unit=raw_unit, source=source, input_sha256=input_sha256)
-        return SensorCalibration(**{**_fields(part), "stats": {**part.stats, **st}})
+        return gated(SensorCalibration(**{**_fields(part), "stats": {**part.stats, **st}}),
+                     force=force)
     oc = np.asarray(model.offset_coef, dtype=np.float64)
     poly = oc.copy()
     poly[0] = 0.0
     terms = TemperatureTerms(temp_ref_c=float(model.reference_degC),
                              temp_range_c=(float(model.t_min_degC), float(model.t_max_degC)),
                              offset_poly=poly)
-    return SensorCalibration(**{**_fields(base), "offset": oc[0], "temperature": terms,
-                                "stats": {**base.stats, **st}, "source": source,
-                                "input_sha256": input_sha256})
+    return gated(SensorCalibration(**{**_fields(base), "offset": oc[0], "temperature": terms,
+                                      "stats": {**base.stats, **st}, "source": source,
+                                      "input_sha256": input_sha256}), force=force)
+
+
+def part_from_yaw(y: Any, *, force: bool = False, **kw: Any) -> SensorCalibration:
+    """A :class:`~triaxcal.SensorCalibration` (model ``"yaw"``) from a
+    :class:`~triaxcal.methods.yaw.YawCalibration`, through the validity gate (``force``: see
+    the module notes); ``kw`` are the part's other fields (``source``, ``input_sha256`` ...),
+    ``warnings`` and ``extra_stats`` go into its stats."""
+    return gated(yaw_part_unjudged(y, **kw), "mag", force=force)
+
+
+def yaw_part_unjudged(y: Any, **kw: Any) -> SensorCalibration:
+    """:func:`part_from_yaw` before the gate (for a caller that judges it itself, as
+    :func:`triaxcal.calibration.session.fit_to_file` does)."""
+    radius = (math.hypot(y.horizontal, y.vertical) if y.vertical is not None
+              else y.horizontal)
+    stats = {"n": y.n, "model": "yaw", "rms": y.rms_horizontal_pct / 100 *
+             y.horizontal, "rms_pct_of_radius": y.rms_horizontal_pct *
+             y.horizontal / radius, "radius": radius, "yaw": y.stats(),
+             "warnings": list(kw.pop("warnings", []))}
+    stats.update(kw.pop("extra_stats", {}) or {})
+    return SensorCalibration(offset=y.offset, matrix=y.matrix, raw_unit=y.raw_unit,
+                             unit=y.unit, radius=radius, model="yaw", stats=stats, **kw)
 
 
 def _fields(part: SensorCalibration) -> dict[str, Any]:
@@ -299,3 +333,22 @@ def fold_asa(part: SensorCalibration, asa: Any) -> SensorCalibration:
     return SensorCalibration(**{**_fields(part), "offset": part.offset / k,
                                 "matrix": part.matrix @ np.diag(k), "temperature": terms,
                                 "stats": stats})
+
+
+def _sensor_of(part: SensorCalibration, sensor: str | None) -> str | None:
+    if sensor is not None:
+        return sensor
+    from ..conventions.units import UNITS
+
+    q = UNITS.get(part.unit, (None,))[0]
+    return q if q in ("accel", "gyro", "mag") else None
+
+
+def gated(part: SensorCalibration, sensor: str | None = None, *,
+          force: bool = False) -> SensorCalibration:
+    """``part`` judged by the validity gate (see the module notes): marked ``valid=True``, or
+    refused, or with ``force`` marked ``valid=False``. ``sensor`` defaults to the quantity of
+    the part's calibrated unit (none for raw counts: then only the checks that need no sensor
+    run)."""
+    s = _sensor_of(part, sensor)
+    return judged(part, check(part, s or "part"), force=force)

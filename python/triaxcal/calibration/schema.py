@@ -200,6 +200,9 @@ PART_FIELDS: dict[str, Field] = {
     # triaxcal.calibration.alignment.Alignment
     "expected_field": Field(optional(json_object)),
     "alignment": Field(optional(json_object)),
+    # the validity gate's verdict (triaxcal.calibration.gate): False only when forced
+    "valid": Field(optional(boolean)),
+    "invalid_reasons": Field(list_of(text(MAX_TEXT, plain=False), max_items=64)),
 }
 
 SENSOR_ID_TEXT = text(256)

@@ -1,13 +1,14 @@
 """One way in for every command that reads a session: a table (CSV / whitespace) or a log.
 
 ``.ulg`` (PX4), ``.bin`` (ArduPilot), ``.bag`` (ROS 1), ``.db3`` / ``.mcap`` / a bag folder
-(ROS 2) go to :func:`triaxcal.read_log`; everything else to the table reader. The options
-``--instance``, ``--topic`` and ``--undo-autopilot-cal`` choose what a log gives.
+(ROS 2) go to :func:`triaxcal.read_log`; everything else to the table reader.
+:class:`~triaxcal.calibration.request.SourceOptions` says which readings to take (columns,
+still poses, and for logs the instance, topics and whether to undo the autopilot's
+calibration).
 """
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,11 +16,13 @@ from typing import Any
 
 import numpy as np
 
+from ..detect.session import PoseSettings
 from ..errors import CalibrationError
 from ..io.logs import is_log, read_log
 from ..io.recording import LogRecording
+from .request import SourceOptions
 
-__all__ = ["Source", "add_source_options", "autopilot_lines", "load_source", "table_source"]
+__all__ = ["Source", "autopilot_lines", "load_source", "table_source"]
 
 _G = {"m/s^2": 9.80665, "g": 1.0, "mg": 1000.0}
 
@@ -38,21 +41,6 @@ class Source:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def add_source_options(p: argparse.ArgumentParser) -> None:
-    """``--instance``, ``--topic``, ``--undo-autopilot-cal`` (logs only)."""
-    p.add_argument("--instance", type=int, default=None, metavar="N",
-                   help="log: which sensor -- PX4 per-sensor topics sensor_accel/gyro/mag "
-                        "instance N (default: sensor_combined, vehicle_magnetometer); "
-                        "ArduPilot IMU/MAG (0), IMU2/MAG2 (1), ...")
-    p.add_argument("--topic", action="append", default=None, metavar="NAME",
-                   help="ROS bag: the sensor_msgs/Imu and/or MagneticField topic to read "
-                        "(repeat, or comma-separate, when the bag has several)")
-    p.add_argument("--undo-autopilot-cal", action="store_true",
-                   help="autopilot log: remove the calibration the autopilot applied (its "
-                        "CAL_* / COMPASS_* / INS_* parameters, with its own equation) so the "
-                        "fit sees the raw sensor")
-
-
 def file_sha256(path: Path) -> str:
     """SHA-256 of a file (of a ROS 2 bag folder: of its files' names and bytes, sorted)."""
     h = hashlib.sha256()
@@ -66,18 +54,18 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
+def table_source(table: Any, sensor: str, options: SourceOptions | None = None) -> Source:
     """Readings of ``sensor`` from a table already read (:func:`triaxcal.io.tables.read_table`):
     the table half of :func:`load_source` (``triaxcal batch`` fits each board so)."""
-    from ..detect.options import settings_from_args
-    from ..detect.session import pose_points
+    from ..detect.session import POSE_N_COLUMN, pose_points
     from ..io.tables import pick_columns
 
-    cols = pick_columns(table, getattr(args, "columns", None), sensor)
+    opts = options if options is not None else SourceOptions()
+    cols = pick_columns(table, opts.columns, sensor)
     pose_stats: dict[str, Any] = {}
-    board = table.names is not None and "pose_n" in table.names  # rows are pose means
-    if getattr(args, "poses", False) or board:  # the capture's pose detection, every sensor
-        pts, pose_stats = pose_points(table, cols, settings_from_args(args))
+    board = table.names is not None and POSE_N_COLUMN in table.names  # rows are pose means
+    if opts.poses or board:  # the capture's pose detection, every sensor
+        pts, pose_stats = pose_points(table, cols, opts.detection)
     else:
         pts = table.data[:, cols]
     return Source(points=pts, path=table.path, sha256=table.sha256, table=table,
@@ -85,24 +73,25 @@ def table_source(table: Any, sensor: str, args: argparse.Namespace) -> Source:
                   extra=pose_stats)
 
 
-def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Source:
-    """Readings of ``sensor`` from ``path`` as ``args`` (``--columns``, ``--poses``, the log
-    options) ask; the same for ``fit``, ``report`` and every command that takes a session."""
+def load_source(path: str | Path, sensor: str, options: SourceOptions | None = None) -> Source:
+    """Readings of ``sensor`` from ``path`` as ``options`` ask (columns, still poses, the log
+    options); the same for ``fit``, ``report`` and every command that takes a session."""
+    opts = options if options is not None else SourceOptions()
     p = Path(path)
-    instance = getattr(args, "instance", None)
-    topic = getattr(args, "topic", None)
-    undo = bool(getattr(args, "undo_autopilot_cal", False))
+    instance = opts.instance
+    topic = opts.topics
+    undo = opts.undo_autopilot_cal
     if not is_log(p):
-        if instance is not None or topic or undo:
+        if opts.for_logs:
             raise CalibrationError(
                 f"--instance, --topic and --undo-autopilot-cal apply to logs (.ulg, .bin, .bag, "
                 f".db3, .mcap); {p} is read as a table"
             )
         from ..io.tables import read_table
 
-        table = read_table(p, skip_bad_lines=bool(getattr(args, "skip_bad_lines", False)))
-        return table_source(table, sensor, args)
-    if getattr(args, "columns", None):
+        table = read_table(p, skip_bad_lines=opts.skip_bad_lines)
+        return table_source(table, sensor, opts)
+    if opts.columns:
         raise CalibrationError(f"--columns applies to tables; {p} is a log: choose the sensor "
                                "with --sensor (and --instance / --topic)")
     if not p.exists():
@@ -116,22 +105,21 @@ def load_source(path: str | Path, sensor: str, args: argparse.Namespace) -> Sour
         "calibrated_by_autopilot": stream.calibrated, "samples": len(stream),
         "rate_hz": stream.rate_hz,
     }}
-    if getattr(args, "poses", False):
-        pts, pose_stats = _log_pose_points(rec, sensor, args)
+    if opts.poses:
+        pts, pose_stats = _log_pose_points(rec, sensor, opts.detection)
         extra.update(pose_stats)
     return Source(points=pts, path=p, sha256=file_sha256(p), raw_unit=stream.unit,
                   columns=[f"{stream.name}:{sensor}"], recording=rec, extra=extra)
 
 
 def _log_pose_points(
-    rec: LogRecording, sensor: str, args: argparse.Namespace
+    rec: LogRecording, sensor: str, detection: PoseSettings
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Still-pose means of ``sensor``, poses found as ``triaxcal capture`` finds them: a pose
     ends when the accelerometer, the gyroscope (when the log has one) or the magnetometer (when
     it is the sensor fitted) says the vehicle moved."""
     from dataclasses import replace
 
-    from ..detect.options import settings_from_args
     from ..detect.session import SENSOR_NAMES, session_poses
 
     acc = rec.stream("accel")
@@ -147,12 +135,12 @@ def _log_pose_points(
         _, sync = rec.synchronized(wanted)
         data = np.hstack([sync[s] for s in wanted])
     names = tuple(n for s in wanted for n in SENSOR_NAMES[s])
-    settings = replace(settings_from_args(args), counts_per_g=per_g)
+    settings = replace(detection, counts_per_g=per_g)
     det, how = session_poses(names, data, settings)
     if len(det.poses) == 0:
         raise CalibrationError(
-            f"no still poses found in {rec.source} (window {args.window} samples): the vehicle "
-            "must rest in each pose for a while, or drop --poses"
+            f"no still poses found in {rec.source} (window {detection.window} samples): the "
+            "vehicle must rest in each pose for a while, or drop --poses"
         )
     i = wanted.index(sensor)
     cols = [3 * i, 3 * i + 1, 3 * i + 2]

@@ -1,58 +1,31 @@
-"""``fit`` options for the magnetometer's surroundings: the expected field from the location
-(``--radius wmm --location LAT,LON[,ALT_M] [--date YYYY-MM-DD]``), the yaw-only calibration
-(``--yaw-only``) and the alignment with the accelerometer (``--align``)."""
+"""The magnetometer in its surroundings, for a fit of a recorded session
+(:class:`~triaxcal.calibration.request.FieldOptions`): the field the World Magnetic Model
+expects where and when it was recorded, the yaw-only calibration, and the alignment with the
+accelerometer."""
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
-from ..methods.field import ExpectedField, expected_field, parse_location, strength_check
-from .file import Alignment, Calibration, SensorCalibration
+from ..methods.field import ExpectedField, expected_field, strength_check
+from .alignment import Alignment
+from .part import SensorCalibration
+from .request import FitRequest
 
-__all__ = ["add_field_options", "alignment_for", "expected_from_args", "measured_strength_ut",
-           "yaw_part"]
-
-
-def add_field_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("the expected field, yaw-only calibration, alignment (magnetometer)")
-    g.add_argument("--location", default=None, metavar="LAT,LON[,ALT_M]",
-                   help="where the data were recorded (deg, deg, m above the WGS 84 ellipsoid): "
-                        "the World Magnetic Model's field there is recorded, compared with the "
-                        "fit and, with --radius wmm, used as the radius (needs triaxcal[geo])")
-    g.add_argument("--date", default=None, metavar="YYYY-MM-DD",
-                   help="date of the recording for the World Magnetic Model (default: today)")
-    g.add_argument("--yaw-only", action="store_true",
-                   help="magnetometer turned about the vertical only (boat, car, rover): fit "
-                        "the horizontal ellipse; the vertical offset from the --location's "
-                        "field and the accelerometer columns (ax,ay,az) when present")
-    g.add_argument("--align", action="store_true",
-                   help="magnetometer: also find its rotation into the accelerometer's frame "
-                        "from still poses where both were read (the accelerometer part must "
-                        "be in -o CAL.json already)")
+__all__ = ["alignment_for", "expected_for", "field_stats", "measured_strength_ut", "yaw_part"]
 
 
-def expected_from_args(args: argparse.Namespace, sensor: str) -> ExpectedField | None:
-    """The WMM field for ``--location`` / ``--date`` (None without a location)."""
-    radius_wmm = isinstance(args.radius, str) and args.radius.strip().lower() == "wmm"
-    loc = getattr(args, "location", None)
-    if getattr(args, "date", None) and not loc:
-        raise CalibrationError("--date needs --location LAT,LON[,ALT_M]")
-    if radius_wmm and not loc:
-        raise CalibrationError("--radius wmm needs --location LAT,LON[,ALT_M] (and --date "
-                               "YYYY-MM-DD of the recording; default today)")
+def expected_for(request: FitRequest) -> ExpectedField | None:
+    """The World Magnetic Model's field where and when the request says the data were recorded
+    (None without a location)."""
+    loc = request.field.location
     if loc is None:
         return None
-    if sensor != "mag":
-        raise CalibrationError(f"--location gives the magnetic field; it applies to --sensor "
-                               f"mag, not {sensor}")
-    lat, lon, alt = parse_location(loc)
-    return expected_field(lat, lon, alt, date=args.date)
+    return expected_field(*loc, date=request.field.date)
 
 
 def measured_strength_ut(part: SensorCalibration) -> float | None:
@@ -115,62 +88,48 @@ def _synced(src: Any) -> tuple[np.ndarray, np.ndarray] | None:
     return None
 
 
-def yaw_part(args: argparse.Namespace, src: Any, expected: ExpectedField | None,
-             raw_unit: str) -> SensorCalibration:
-    """The ``--yaw-only`` fit of ``src``'s magnetometer readings."""
+def yaw_part(src: Any, expected: ExpectedField | None, raw_unit: str, *,
+             accel: SensorCalibration | None = None) -> SensorCalibration:
+    """The yaw-only fit of ``src``'s magnetometer readings; ``accel`` calibrates the
+    accelerometer readings that give the vertical (when the source has them)."""
     from ..methods.yaw import fit_yaw
+    from ..quality.coverage import coverage
+    from .part import _norm_stats
+    from .parts import yaw_part_unjudged
 
-    if args.poses:
-        raise CalibrationError("--yaw-only fits the turning readings themselves: drop --poses")
-    accel = None
+    acc = None
     pair = _synced(src)
     mag = src.points
     if pair is not None:
-        mag, accel = pair
-        acal = _accel_part(args)
-        if acal is not None:
-            accel = acal.apply(accel)
-    from ..quality.coverage import coverage
-    from .file import _norm_stats
-
-    y = fit_yaw(mag, accel=accel, field=expected, raw_unit=raw_unit)
+        mag, acc = pair
+        if accel is not None:
+            acc = accel.apply(acc)
+    y = fit_yaw(mag, accel=acc, field=expected, raw_unit=raw_unit)
     cal = y.apply(mag)
-    return y.part(input_sha256=src.sha256, source=str(src.path),
-                  extra_stats={"columns": src.columns, "n_input": len(mag),
-                               "coverage_pct": coverage(cal).percent,
-                               "norms": _norm_stats(np.linalg.norm(cal, axis=1))})
+    return yaw_part_unjudged(y, input_sha256=src.sha256, source=str(src.path),
+                             extra_stats={"columns": src.columns, "n_input": len(mag),
+                                          "coverage_pct": coverage(cal).percent,
+                                          "norms": _norm_stats(np.linalg.norm(cal, axis=1))})
 
 
-def _accel_part(args: argparse.Namespace) -> SensorCalibration | None:
-    path = Path(args.output)
-    if path.exists() and not args.new:
-        try:
-            return Calibration.load(path).accel
-        except CalibrationError:
-            return None
-    return None
-
-
-def alignment_for(args: argparse.Namespace, src: Any, mag_part: SensorCalibration,
-                  expected: ExpectedField | None) -> tuple[Alignment, str]:
-    """The ``--align`` result for the fitted magnetometer part, and its text."""
+def alignment_for(src: Any, mag_part: SensorCalibration, expected: ExpectedField | None, *,
+                  accel: SensorCalibration | None, window: int) -> tuple[Alignment, str]:
+    """The alignment of the fitted magnetometer part with the accelerometer (``accel``, its
+    calibration), from still poses where both were read; and its text."""
     from ..methods.alignment import align_mag_accel
 
-    path = Path(args.output)
-    accel_part = _accel_part(args)
-    if accel_part is None:
+    if accel is None:
         raise CalibrationError(
-            f"--align needs the accelerometer's calibration in {path}: fit it first "
-            f"(triaxcal fit DATA --sensor accel --poses -o {path}), then the magnetometer")
+            "--align needs the accelerometer's calibration: fit it first into the same "
+            "calibration file (triaxcal fit DATA --sensor accel --poses -o CAL.json), then the "
+            "magnetometer with --align -o CAL.json")
     pair = _synced(src)
     if pair is None:
         raise CalibrationError(
             "--align needs the accelerometer read with the magnetometer: a table with "
             "ax,ay,az beside the magnetometer columns, or a log with both sensors")
-    if args.poses:
-        raise CalibrationError("--align finds the still poses itself: drop --poses")
     mag, acc = pair
-    al = align_mag_accel(mag, acc, mag_cal=mag_part, accel_cal=accel_part, window=args.window,
+    al = align_mag_accel(mag, acc, mag_cal=mag_part, accel_cal=accel, window=window,
                          expected_inclination_deg=(None if expected is None
                                                    else expected.inclination_deg))
     return Alignment.from_result(al), al.text()

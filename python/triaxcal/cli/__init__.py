@@ -9,6 +9,7 @@ import sys
 from typing import Sequence
 
 from .. import __version__
+from ..calibration.gate import InvalidCalibrationError
 from ..errors import CalibrationError
 from ..io.files import os_error_message
 from ._help import PlainHelpFormatter
@@ -46,6 +47,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
+    except InvalidCalibrationError as exc:  # the validity gate refused: nothing was written
+        print(f"triaxcal {args.command}: not written: {exc}", file=sys.stderr)
+        return 2
     except CalibrationError as exc:
         print(f"triaxcal {args.command}: error: {exc}", file=sys.stderr)
         return 1

@@ -7,12 +7,12 @@ import sys
 from typing import Any
 
 from ..capture.run import capture, channel_names
-from ..detect.options import add_pose_options, positive_int, settings_from_args
 from ..detect.session import POSE_N_COLUMN
 from ..errors import CalibrationError
 from ..io.board_poses import BoardPoseSettings
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
+from ._pose_options import add_pose_options, positive_int, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 

@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration.file import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..capture.run import CaptureResult, capture, channel_names, read_session
-from ..detect.options import add_pose_options, default_settings, settings_from_args
 from ..detect.session import PoseSettings, session_poses
 from ..errors import CalibrationError
 from ..export import write_outputs
@@ -35,6 +35,7 @@ from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
 from ..quality.coverage import coverage, coverage_warning
 from ..sim import GYRO_COUNTS_PER_DPS, Script, SensorTruth, SimDevice, SimIMU, globe_script
+from ._pose_options import add_pose_options, settings_from_args
 from .capture import add_live_options
 
 HELP = "capture from a simulated board, calibrate it, and compare with the truth"
@@ -135,7 +136,7 @@ def run_demo(
     buttons write into ``out/live``); the page, still serving, is returned as
     ``results["live_page"]``: close it when done.
     """
-    settings = detection if detection is not None else default_settings()
+    settings = detection if detection is not None else PoseSettings()
     t_start = time.monotonic()
     imu = SimIMU(seed)
     script = globe_script(hold_s=1.0, seed=seed)

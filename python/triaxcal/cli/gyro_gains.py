@@ -133,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     for w in warnings:
         print(f"warning: {w}", file=out)
     part = part_from_gyro_gains(res, raw_unit=u, stats={"rate_hz": rate, "warnings": warnings},
-                                source=str(table.path), input_sha256=file_sha256(table.path))
+                                source=str(table.path), input_sha256=file_sha256(table.path),
+                                force=args.force)
     verb = save_part(args, "gyro", part)
     print(f"{verb} {args.output}: gyro ({u} -> deg/s, gains from turns of {res.angle_deg:g} deg)",
           file=out)

@@ -36,6 +36,7 @@ __all__ = [
     "ResolvedPoses",
     "session_poses",
     "sensor_columns",
+    "stored_settings",
 ]
 
 #: Rows at the start of a session from which the counts per g and the sample rate are taken.
@@ -333,3 +334,17 @@ def pose_points(
              "pose_detection": settings.with_resolved(how).to_dict(),
              "pose_sensors": list(how.sensors)}
     return pts, stats
+
+
+def stored_settings(stats: Any) -> PoseSettings:
+    """The pose settings a calibration part was fitted with (``stats["pose_detection"]``).
+
+    Parts written before the detector used every sensor stored only ``pose_window`` and
+    ``units_per_g``: they replay with the accelerometer alone, as they were made.
+    """
+    d = stats.get("pose_detection") if hasattr(stats, "get") else None
+    if d is not None:
+        return PoseSettings.from_dict(d)
+    return PoseSettings(window=int(stats.get("pose_window", 25)),
+                        counts_per_g=float(stats.get("units_per_g", 16384.0)),
+                        use_gyro=False, use_mag=False, hold_windows=None)

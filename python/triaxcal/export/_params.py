@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration.file import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..conventions.units import DEVICE_COUNTS_PER_UNIT, per_unit, unit_factor
 from ..errors import CalibrationError
 

@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration.file import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..conventions.rotations import rotation_angle_deg
 from ..conventions.units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ..errors import CalibrationError

@@ -41,7 +41,6 @@ noise up to 10 mg rms. Change them with ``Limits(...)`` or ``--limit name=value`
 
 from __future__ import annotations
 
-import argparse
 import csv
 import hashlib
 import json
@@ -58,7 +57,9 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from ..calibration.file import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..calibration.request import FitRequest, SourceOptions
 from ..errors import CalibrationError
 from ..quality.coverage import coverage
 
@@ -68,7 +69,7 @@ __all__ = [
     "BoardResult",
     "Limits",
     "batch_fit",
-    "fit_options",
+    "batch_request",
     "judge",
     "read_grouped_table",
     "write_summary",
@@ -253,17 +254,16 @@ def _fit_checks(part: SensorCalibration, noise_raw: float | None, limits: Limits
     return fails, m
 
 
-def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float | None:
+def _pose_noise(table: Any, cols: list[int], request: FitRequest) -> float | None:
     """Sensor noise (raw units, rms): within each still pose (found as ``fit --poses`` finds
     them) the standard deviation of the sample-to-sample differences over sqrt(2) (blind to
     slow drift and to the slow ends of moves), largest axis; the median over poses."""
-    if not args.poses:
+    if not request.source.poses:
         return None
-    from ..detect.options import settings_from_args
     from ..detect.session import sensor_columns, session_poses
 
     accel = None if "accel" in sensor_columns(table.names) else cols
-    det, _ = session_poses(table.names, table.data, settings_from_args(args), accel=accel)
+    det, _ = session_poses(table.names, table.data, request.source.detection, accel=accel)
     noise = []
     for p in det.poses:
         seg = table.data[p.start:p.end][:, cols]
@@ -274,39 +274,38 @@ def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float 
 
 def judge(
     table: Any,
-    args: argparse.Namespace,
+    request: FitRequest,
     limits: Limits,
     *,
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
-    from ..calibration.session import fit_table
+    from ..calibration.session import fit_session
     from ..io.tables import pick_columns
 
     source = str(table.path)
     fails: list[tuple[str, str]] = []
     measures: dict[str, Any] = {}
     try:
-        cols = pick_columns(table, args.columns, args.sensor or "accel")
+        cols = pick_columns(table, request.source.columns, request.sensor)
     except CalibrationError as exc:
         return BoardResult(board_id, source, "fail", ("unreadable",), f"unreadable: {exc}", None)
     raw = table.data[:, cols]
-    f, m = _raw_checks(raw, limits, max(1, int(args.window)))
+    f, m = _raw_checks(raw, limits, request.source.detection.window)
     fails += f
     measures.update(m)
     part = None
     try:
-        outcome = fit_table(table, args)
+        outcome = fit_session(table, request)
         part = outcome.part
     except CalibrationError as exc:
         # name the cause when it is a too narrow set of directions
         pts = raw
-        if args.poses:
+        if request.source.poses:
             try:
-                from ..detect.options import settings_from_args
                 from ..detect.session import pose_points
 
-                pts, _ = pose_points(table, cols, settings_from_args(args))
+                pts, _ = pose_points(table, cols, request.source.detection)
             except CalibrationError:
                 pts = raw[:0]
         cov = coverage(pts).percent
@@ -323,7 +322,7 @@ def judge(
             fails.append(("coverage", f"the poses cover {cov:.0f} % of the sphere (limit "
                           f"{limits.coverage_min_pct:g} %): turn the board through more "
                           "orientations"))
-        noise_raw = _pose_noise(table, cols, args)
+        noise_raw = _pose_noise(table, cols, request)
         f, m = _fit_checks(part, noise_raw, limits)
         fails += f
         measures.update(m)
@@ -338,25 +337,17 @@ def judge(
 # ------------------------------------------------------------------------------ reading input
 
 
-def fit_options(**overrides: Any) -> argparse.Namespace:
-    """The options of ``triaxcal fit`` with their defaults (``poses=True``), overridden.
+def batch_request(**changes: Any) -> FitRequest:
+    """The :class:`~triaxcal.calibration.request.FitRequest` of ``triaxcal batch`` by default:
+    ``triaxcal fit``'s defaults with still poses (``source.poses``), then ``changes``.
 
     Examples
     --------
-    >>> fit_options(model="full").model, fit_options().poses
+    >>> batch_request(model="full").model, batch_request().source.poses
     ('full', True)
     """
-    from ..calibration.session import add_fit_options
-
-    p = argparse.ArgumentParser(add_help=False)
-    add_fit_options(p)
-    ns = p.parse_args([])
-    ns.poses = True
-    for k, v in overrides.items():
-        if not hasattr(ns, k):
-            raise CalibrationError(f"unknown fit option {k!r}")
-        setattr(ns, k, v)
-    return ns
+    base = FitRequest(source=SourceOptions(poses=True))
+    return base.replace(**changes) if changes else base
 
 
 _ID_UNSAFE = re.compile(r"[^A-Za-z0-9._-]")
@@ -443,8 +434,8 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
 # ------------------------------------------------------------------------------ the batch
 
 
-def _work(job: tuple[str, Any, argparse.Namespace, Limits, str | None, str]) -> BoardResult:
-    board_id, src, args, limits, out_dir, prefix = job
+def _work(job: tuple[str, Any, FitRequest, Limits, str | None, str]) -> BoardResult:
+    board_id, src, request, limits, out_dir, prefix = job
     from ..io.tables import read_table
 
     if isinstance(src, (str, Path)):
@@ -456,23 +447,23 @@ def _work(job: tuple[str, Any, argparse.Namespace, Limits, str | None, str]) -> 
     else:
         table = src
     try:
-        res = judge(table, args, limits, board_id=board_id)
+        res = judge(table, request, limits, board_id=board_id)
     except Exception as exc:  # noqa: BLE001 - one bad board must not stop the line
         res = BoardResult(board_id, str(getattr(table, "path", src)), "fail", ("fit_failed",),
                           f"the fit failed: {exc!r}", None)
     if out_dir is not None and res.part is not None:
-        res = replace(res, outputs=_write_board(res, args, limits, Path(out_dir), prefix))
+        res = replace(res, outputs=_write_board(res, request, limits, Path(out_dir), prefix))
     return res
 
 
-def _write_board(res: BoardResult, args: argparse.Namespace, limits: Limits, out: Path,
+def _write_board(res: BoardResult, request: FitRequest, limits: Limits, out: Path,
                  prefix: str) -> tuple[str, ...]:
     from ..export import export
 
     assert res.part is not None
     folder = out / res.board_id
     folder.mkdir(parents=True, exist_ok=True)
-    sensor = args.sensor or "accel"
+    sensor = request.sensor
     parts: dict[str, Any] = {sensor: res.part}
     cal = Calibration(**parts, sensor_id=res.board_id, extra={
         "verdict": res.verdict, "reasons": list(res.reasons), "message": res.message,
@@ -519,7 +510,7 @@ class _Progress:
 def batch_fit(
     sources: Sequence[tuple[str, Any]],
     *,
-    args: argparse.Namespace | None = None,
+    request: FitRequest | None = None,
     limits: Limits | None = None,
     out_dir: Any = None,
     prefix: str = "triaxcal",
@@ -532,8 +523,9 @@ def batch_fit(
     ----------
     sources : sequence of (board id, session path or Table)
         One entry per board (see :func:`read_grouped_table` for one table of many boards).
-    args : argparse.Namespace, optional
-        The fit options (:func:`fit_options`; default: ``triaxcal fit``'s with ``--poses``).
+    request : FitRequest, optional
+        How each board is fitted (default: :func:`batch_request`, ``triaxcal fit``'s defaults
+        with still poses).
     limits : Limits, optional
     out_dir : str or Path, optional
         Where to write ``<id>/calibration.json`` (every fitted board, with the verdict in
@@ -553,7 +545,7 @@ def batch_fit(
     """
     from ..export._cgen import _ident
 
-    args = args or fit_options()
+    request = request if request is not None else batch_request()
     limits = limits or Limits()
     prefix = _ident(prefix)
     ids = [safe_id(i) for i, _ in sources]
@@ -567,7 +559,7 @@ def batch_fit(
     out = None if out_dir is None else str(out_dir)
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
-    work = [(ids[k], src, args, limits, out, prefix) for k, (_, src) in enumerate(sources)]
+    work = [(ids[k], src, request, limits, out, prefix) for k, (_, src) in enumerate(sources)]
     n_jobs = jobs if jobs is not None else (os.cpu_count() or 1)
     if n_jobs < 1:
         raise CalibrationError(f"jobs must be >= 1, got {n_jobs}")

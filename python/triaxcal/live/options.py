@@ -77,7 +77,7 @@ class LiveOptions:
     send_timeout_s: float = 3.0
 
     def __post_init__(self) -> None:
-        from ..calibration.session import parse_radius
+        from ..calibration.request import parse_radius
         from ..export._cgen import _ident
 
         if self.model not in (*MODELS, "auto"):

@@ -121,7 +121,7 @@ class LiveState:
                 self.cols[sensor] = c
         if "accel" not in self.cols and len(names) >= 3:
             self.cols["accel"] = [0, 1, 2]
-        from ..calibration.session import parse_radius
+        from ..calibration.request import parse_radius
 
         self.accel_radius, self.accel_unit = parse_radius(opts.accel_radius, "accel")
         if opts.mag_radius is not None:

@@ -53,7 +53,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from ..calibration.file import SensorCalibration, TemperatureTerms
+from ..calibration.part import SensorCalibration, TemperatureTerms
 from ..errors import CalibrationError
 
 __all__ = [

@@ -32,8 +32,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..calibration import schema as _schema
+from .._checks import fields as _schema
 from ..errors import CalibrationError
+from ..quality.bounds import STRENGTH_TOLERANCE
 
 __all__ = [
     "STRENGTH_TOLERANCE",
@@ -48,7 +49,6 @@ __all__ = [
 ]
 
 #: The fitted field strength may differ from the model's by this share before it is warned about.
-STRENGTH_TOLERANCE = 0.10
 
 #: The geomagnetic model evaluated.
 MODEL = "WMM2025"

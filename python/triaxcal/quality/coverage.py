@@ -30,9 +30,9 @@ import numpy as np
 
 from .._checks.arrays import as_points
 from ..errors import CalibrationError
+from .bounds import LOW_COVERAGE_PCT
 
 __all__ = [
-    "LOW_COVERAGE_PCT",
     "N_CELLS",
     "Coverage",
     "SphereCells",
@@ -44,10 +44,6 @@ __all__ = [
 
 #: Number of equal-area cells of the shared coverage measure.
 N_CELLS = 24
-
-#: Below this share of the cells (percent) a fit or report warns that too little is covered.
-LOW_COVERAGE_PCT = 50.0
-
 
 @dataclass(frozen=True)
 class SphereCells:

@@ -1,7 +1,9 @@
-"""The pose-detection options shared by ``capture``, ``fit --poses``, ``report`` and ``demo``.
+"""The pose-detection options shared by ``capture``, ``fit --poses``, ``report``, ``demo``,
+``temperature``, ``sphere-center`` and ``batch``.
 
-One argument group, one conversion to :class:`triaxcal.detect.session.PoseSettings`: the commands
-cannot drift apart, and the demo uses nothing a user cannot pass.
+One argument group, one conversion to :class:`triaxcal.detect.session.PoseSettings` (whose
+defaults the options take): the commands cannot drift apart, and the demo uses nothing a user
+cannot pass.
 """
 
 from __future__ import annotations
@@ -10,7 +12,10 @@ import argparse
 import math
 from typing import Any
 
-from .session import HEAD_ROWS, PoseSettings
+from ..detect.session import HEAD_ROWS, PoseSettings
+
+#: The defaults every option takes from (one place: the settings object itself).
+_D = PoseSettings()
 
 
 def _positive_float(text: str) -> float:
@@ -72,11 +77,13 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
         "A pose ends when any sensor says the board moved. The same options give the same poses "
         "in capture, fit --poses, report and demo.",
     )
-    g.add_argument("--window", type=positive_int, default=25, metavar="N",
-                   help="samples per averaging window (default 25: 0.25 s at 100 Hz)")
-    g.add_argument("--accel-threshold", type=_positive_float, default=0.07, metavar="G",
+    g.add_argument("--window", type=positive_int, default=_D.window, metavar="N",
+                   help=f"samples per averaging window (default {_D.window}: "
+                        f"{_D.window / 100:g} s at 100 Hz)")
+    g.add_argument("--accel-threshold", type=_positive_float, default=_D.accel_threshold_g,
+                   metavar="G",
                    help="accelerometer: largest change of a window mean from the previous "
-                        "window, in g (default 0.07, the seed's rule)")
+                        "window, in g (default %(default)s, the seed's rule)")
     g.add_argument("--counts-per-g", "--units-per-g", dest="counts_per_g",
                    type=_positive_float, default=None, metavar="C",
                    help="accelerometer units per g (16384 at +-2 g; 1 for a board that prints "
@@ -91,11 +98,11 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
                    help="magnetometer: largest change of a window mean from the previous "
                         "window, in its raw units (counts). 'auto' (default): learnt from its "
                         "noise; 'off': it does not take part")
-    g.add_argument("--hold", type=_hold, default=4, metavar="W",
+    g.add_argument("--hold", type=_hold, default=_D.hold_windows, metavar="W",
                    help="register a pose once it has been still for W windows (the capture's "
                         "bell, the seed's beep), then average it until the board moves; 'off': "
-                        "decide when the board moves (default 4)")
-    g.add_argument("--holdoff", type=_nonnegative_float, default=0.0, metavar="S",
+                        "decide when the board moves (default %(default)s)")
+    g.add_argument("--holdoff", type=_nonnegative_float, default=_D.holdoff_s, metavar="S",
                    help="seconds ignored after each registered pose, to let go of the board "
                         "(the seed waits 2 s after its beep: --holdoff 2). Default 0")
     g.add_argument("--rate-hz", type=_positive_float, default=None, metavar="HZ",
@@ -104,7 +111,8 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
 
 
 def settings_from_args(args: Any) -> PoseSettings:
-    """The :class:`PoseSettings` that the options in ``args`` describe."""
+    """The :class:`~triaxcal.detect.session.PoseSettings` that the options in ``args`` describe
+    (validated by the settings object)."""
 
     def thr(v: Any) -> float | None:
         return None if v in ("auto", "off", None) else float(v)
@@ -121,39 +129,3 @@ def settings_from_args(args: Any) -> PoseSettings:
         holdoff_s=float(args.holdoff),
         rate_hz=args.rate_hz,
     )
-
-
-def default_settings() -> PoseSettings:
-    """The settings a user gets by passing none of the options."""
-    p = argparse.ArgumentParser(add_help=False)
-    add_pose_options(p)
-    return settings_from_args(p.parse_args([]))
-
-
-def stored_settings(stats: Any) -> PoseSettings:
-    """The pose settings a calibration part was fitted with (``stats["pose_detection"]``).
-
-    Parts written before the detector used every sensor stored only ``pose_window`` and
-    ``units_per_g``: they replay with the accelerometer alone, as they were made.
-    """
-    d = stats.get("pose_detection") if hasattr(stats, "get") else None
-    if d is not None:
-        return PoseSettings.from_dict(d)
-    return PoseSettings(window=int(stats.get("pose_window", 25)),
-                        counts_per_g=float(stats.get("units_per_g", 16384.0)),
-                        use_gyro=False, use_mag=False, hold_windows=None)
-
-
-def apply_settings(args: Any, settings: PoseSettings) -> None:
-    """Set the pose options of ``args`` (an argparse namespace) to ``settings``: the inverse of
-    :func:`settings_from_args`."""
-    args.window = settings.window
-    args.accel_threshold = settings.accel_threshold_g
-    args.counts_per_g = settings.counts_per_g
-    args.gyro_threshold = ("off" if not settings.use_gyro else
-                           "auto" if settings.gyro_threshold is None else settings.gyro_threshold)
-    args.mag_threshold = ("off" if not settings.use_mag else
-                          "auto" if settings.mag_threshold is None else settings.mag_threshold)
-    args.hold = settings.hold_windows
-    args.holdoff = settings.holdoff_s
-    args.rate_hz = settings.rate_hz
