@@ -9,8 +9,14 @@ import numpy as np
 import pytest
 import triaxcal as tc
 import triaxcal.detect.session as poses_mod
-from triaxcal.detect.options import add_pose_options, settings_from_args, stored_settings
-from triaxcal.detect.session import HEAD_ROWS, PoseSettings, sensor_columns, session_poses
+from triaxcal.cli._pose_options import add_pose_options, settings_from_args
+from triaxcal.detect.session import (
+    HEAD_ROWS,
+    PoseSettings,
+    sensor_columns,
+    session_poses,
+    stored_settings,
+)
 
 NAMES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp")
 

@@ -230,7 +230,7 @@ def test_report_figure(realdata, tmp_path):
 
 
 def test_plot_needs_matplotlib(monkeypatch, tmp_path):
-    import triaxcal.report as rp
+    import triaxcal.report.figure as rp
 
     monkeypatch.setattr(rp, "have_matplotlib", lambda: False)
     part = tc.SensorCalibration(offset=[0, 0, 0], matrix=np.eye(3), radius=1.0)

@@ -26,7 +26,8 @@ gains                   raw and calibrated units measure the same quantity and a
                         differ by more than ``CORE["MAX_AXIS_RATIO"]`` between axes
 offset                  the accelerometer's offset exceeds ``MAX_ACCEL_OFFSET_G``; the
                         magnetometer's exceeds ArduPilot's ``COMPASS_OFFS_MAX`` (raw field
-                        units) or ``MAX_HARD_IRON_TO_FIELD`` times the field
+                        units; raw counts have no absolute bound: a tumble determines any
+                        offset)
 yaw-only                the calibrated headings leave an arc wider than
                         ``MAX_YAW_HEADING_GAP_DEG`` unvisited, the residual exceeds
                         ``MAX_RESIDUAL_PCT``, or the hard iron is more than
@@ -199,7 +200,7 @@ def _offset_reasons(part: SensorCalibration, sensor: str) -> list[str]:
                     f"its hard iron reaches {float(per_axis.max()):.0f} mG on one axis (at most "
                     f"{B.MAX_COMPASS_OFFSET_MG:.0f} mG, ArduPilot's COMPASS_OFFS_MAX): a magnet "
                     "or steel next to the sensor, or a fit that ran away")
-        field = _field_size(part)
+        field = _field_size(part) if part.model == "yaw" else None
         if field is not None and field > 0:
             ratio = float(np.linalg.norm(cal_off)) / field
             if ratio > B.MAX_HARD_IRON_TO_FIELD:
@@ -278,7 +279,7 @@ def check(part: SensorCalibration, sensor: str, *, points: Any = None) -> Verdic
     >>> part = tc.SensorCalibration(offset=[0, 0, 20.0], matrix=np.eye(3), raw_unit="m/s^2",
     ...                             unit="m/s^2", radius=9.80665, model="axis")
     >>> v = check(part, "accel")
-    >>> v.valid, v.reasons[0][:40]
+    >>> v.valid, v.reasons[0][:39]
     (False, 'its offset reaches 20 m/s^2 on one axis')
     """
     if not isinstance(part, SensorCalibration):

@@ -23,7 +23,7 @@ Examples
 >>> FitRequest(sensor="accel", field=FieldOptions(yaw_only=True))  # doctest: +ELLIPSIS
 Traceback (most recent call last):
     ...
-triaxcal.CalibrationError: yaw_only (--yaw-only) applies to the magnetometer ...
+triaxcal.CalibrationError: yaw_only applies to the magnetometer: ...not accel
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from dataclasses import dataclass, replace
 from dataclasses import field as _field
 from typing import Any
 
+from .._checks.spelling import opt
 from ..conventions.names import SENSORS
 from ..detect.session import PoseSettings
 from ..errors import CalibrationError
@@ -79,17 +80,17 @@ def parse_radius(text: str, sensor: str) -> tuple[float, str]:
     (48.0, 'uT')
     """
     if not isinstance(text, str) or len(text) > 64:
-        raise CalibrationError(f"radius (--radius) must be text such as 1g or 48uT, got "
+        raise CalibrationError(f"{opt('radius')} must be text such as 1g or 48uT, got "
                                f"{str(text)[:64]!r}")
     m = re.fullmatch(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*)?\s*", text)
     if not m:
         raise CalibrationError(
-            f"radius (--radius) {text!r}: give a number with an optional unit, e.g. 1g, "
+            f"{opt('radius')} {text!r}: give a number with an optional unit, e.g. 1g, "
             "9.80665, 48uT, 16384"
         )
     value = float(m.group(1))
     if not (math.isfinite(value) and value > 0):
-        raise CalibrationError(f"radius (--radius) must be a finite number greater than zero, "
+        raise CalibrationError(f"{opt('radius')} must be a finite number greater than zero, "
                                f"got {text!r}")
     suffix = (m.group(2) or "").strip()
     if suffix:
@@ -97,7 +98,7 @@ def parse_radius(text: str, sensor: str) -> tuple[float, str]:
                 else _UNIT_ALIASES.get(suffix) or _UNIT_ALIASES.get(suffix.lower()))
         if unit is None:
             raise CalibrationError(
-                f"radius (--radius) {text!r}: unknown unit {suffix!r}; use one of {_UNITS_EXACT}"
+                f"{opt('radius')} {text!r}: unknown unit {suffix!r}; use one of {_UNITS_EXACT}"
             )
         return value, unit
     if sensor == "accel":
@@ -169,27 +170,27 @@ class SourceOptions:
                 if isinstance(cols, Sequence) and len(cols) == 3:
                     cols = ",".join(str(c) for c in cols)
                 else:
-                    raise CalibrationError(f"columns (--columns) must be three column names or "
+                    raise CalibrationError(f"{opt('columns')} must be three column names or "
                                            f"indices, e.g. ax,ay,az or 0,1,2, got {cols!r}")
-            _text(cols, "columns (--columns)", 256)
+            _text(cols, f"{opt('columns')}", 256)
             if len([c for c in cols.split(",") if c.strip()]) != 3:
-                raise CalibrationError(f"columns (--columns) needs three columns (x,y,z), got "
+                raise CalibrationError(f"{opt('columns')} needs three columns (x,y,z), got "
                                        f"{cols[:64]!r}")
             object.__setattr__(self, "columns", cols)
-        _flag(self.poses, "poses (--poses)")
+        _flag(self.poses, f"{opt('poses')}")
         if not isinstance(self.detection, PoseSettings):
             raise CalibrationError("detection must be a triaxcal.PoseSettings")
         if self.instance is not None:
-            _whole(self.instance, "instance (--instance)", 0, 255)
+            _whole(self.instance, f"{opt('instance')}", 0, 255)
         if self.topics is not None:
             topics = (self.topics,) if isinstance(self.topics, str) else self.topics
             if not isinstance(topics, Sequence) or not topics or len(topics) > 64:
-                raise CalibrationError("topics (--topic) must be one to 64 topic names")
+                raise CalibrationError(f"{opt('topics')} must be one to 64 topic names")
             flat = tuple(t.strip() for item in topics
-                         for t in _text(item, "topic (--topic)").split(",") if t.strip())
+                         for t in _text(item, f"{opt('topics')}").split(",") if t.strip())
             object.__setattr__(self, "topics", flat)
-        _flag(self.undo_autopilot_cal, "undo_autopilot_cal (--undo-autopilot-cal)")
-        _flag(self.skip_bad_lines, "skip_bad_lines (--skip-bad-lines)")
+        _flag(self.undo_autopilot_cal, f"{opt('undo_autopilot_cal')}")
+        _flag(self.skip_bad_lines, f"{opt('skip_bad_lines')}")
 
     @property
     def for_logs(self) -> bool:
@@ -229,7 +230,7 @@ class FieldOptions:
                 loc = parse_location(loc)
             if not isinstance(loc, Sequence) or len(loc) not in (2, 3) or any(
                     isinstance(v, bool) or not isinstance(v, (int, float)) for v in loc):
-                raise CalibrationError("location (--location) must be LAT,LON[,ALT_M] in degrees "
+                raise CalibrationError(f"{opt('location')} must be LAT,LON[,ALT_M] in degrees "
                                        "and metres")
             lat, lon, alt = float(loc[0]), float(loc[1]), float(loc[2]) if len(loc) == 3 else 0.0
             _check_place(lat, lon, alt)
@@ -241,14 +242,14 @@ class FieldOptions:
                     d = _dt.date.fromisoformat(d.strip())
                 except ValueError:
                     raise CalibrationError(
-                        f"date (--date) {d[:32]!r}: give the date as YYYY-MM-DD") from None
+                        f"{opt('date')} {d[:32]!r}: give the date as YYYY-MM-DD") from None
             if not isinstance(d, _dt.date):
-                raise CalibrationError("date (--date) must be a date (YYYY-MM-DD)")
+                raise CalibrationError(f"{opt('date')} must be a date (YYYY-MM-DD)")
             object.__setattr__(self, "date", d)
             if self.location is None:
-                raise CalibrationError("date (--date) needs location (--location LAT,LON[,ALT_M])")
-        _flag(self.yaw_only, "yaw_only (--yaw-only)")
-        _flag(self.align, "align (--align)")
+                raise CalibrationError(f"{opt('date')} needs {opt('location', 'LAT,LON[,ALT_M]')}")
+        _flag(self.yaw_only, f"{opt('yaw_only')}")
+        _flag(self.align, f"{opt('align')}")
 
 
 @dataclass(frozen=True)
@@ -302,16 +303,16 @@ class FitRequest:
 
     def __post_init__(self) -> None:
         if self.sensor not in SENSORS:
-            raise CalibrationError(f"sensor (--sensor) must be one of {', '.join(SENSORS)}, got "
+            raise CalibrationError(f"{opt('sensor')} must be one of {', '.join(SENSORS)}, got "
                                    f"{str(self.sensor)[:32]!r}")
         if self.model not in (*MODELS, "auto"):
-            raise CalibrationError(f"model (--model) must be one of "
+            raise CalibrationError(f"{opt('model')} must be one of "
                                    f"{', '.join((*MODELS, 'auto'))}, got {str(self.model)[:32]!r}")
         if self.radius is not None:
             r = self.radius
             if not isinstance(r, str):
                 if isinstance(r, bool) or not isinstance(r, (int, float)):
-                    raise CalibrationError(f"radius (--radius) must be a number or text such as "
+                    raise CalibrationError(f"{opt('radius')} must be a number or text such as "
                                            f"1g, got {r!r}")
                 r = repr(float(r))
             if r.strip().lower() != "wmm":
@@ -323,28 +324,28 @@ class FitRequest:
                 _text(v, f"{name} (--{name.replace('_', '-')})", 32)
         s = self.sigma
         if isinstance(s, bool) or not isinstance(s, (int, float)) or not (float(s) >= 0):
-            raise CalibrationError(f"sigma (--sigma) must be a number >= 0 (0: no rejection), "
+            raise CalibrationError(f"{opt('sigma')} must be a number >= 0 (0: no rejection), "
                                    f"got {s!r}")
         object.__setattr__(self, "sigma", float(s))
-        _whole(self.rounds, "rounds (--rounds)", 0, MAX_ROUNDS)
+        _whole(self.rounds, f"{opt('rounds')}", 0, MAX_ROUNDS)
         if self.reject_on not in REJECTION_RULES:
-            raise CalibrationError(f"reject_on (--reject-on) must be one of "
+            raise CalibrationError(f"{opt('reject_on')} must be one of "
                                    f"{', '.join(REJECTION_RULES)}, got {self.reject_on!r}")
         if self.asa is not None:
             a = self.asa
             if not isinstance(a, Sequence) or len(a) != 3 or any(
                     isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255 for v in a):
-                raise CalibrationError(f"asa (--asa) must be the three fuse-ROM bytes 0..255, got "
+                raise CalibrationError(f"{opt('asa')} must be the three fuse-ROM bytes 0..255, got "
                                        f"{a!r}")
             object.__setattr__(self, "asa", tuple(int(v) for v in a))
-        _whole(self.bootstrap, "bootstrap (--bootstrap)", 0, MAX_BOOTSTRAP)
+        _whole(self.bootstrap, f"{opt('bootstrap')}", 0, MAX_BOOTSTRAP)
         if not isinstance(self.fixed, Mapping):
-            raise CalibrationError("fixed (--fix) must map parameter names to numbers")
+            raise CalibrationError(f"{opt('fixed')} must map parameter names to numbers")
         fixed = {}
         for k, v in self.fixed.items():
-            _text(k, "a fixed parameter's name (--fix)", 32)
+            _text(k, f"a parameter's name in {opt('fixed')}", 32)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise CalibrationError(f"fixed (--fix) {k}={v!r}: give a finite number")
+                raise CalibrationError(f"{opt('fixed')} {k}={v!r}: give a finite number")
             fixed[k] = float(v)
         object.__setattr__(self, "fixed", fixed)
         if not isinstance(self.source, SourceOptions):
@@ -355,28 +356,28 @@ class FitRequest:
 
     def _check_combinations(self) -> None:
         f, mag = self.field, self.sensor == "mag"
-        for flag, name in ((f.yaw_only, "yaw_only (--yaw-only)"), (f.align, "align (--align)"),
-                           (f.location is not None, "location (--location)"),
-                           (self.asa is not None, "asa (--asa)")):
+        for flag, name in ((f.yaw_only, "yaw_only"), (f.align, "align"),
+                           (f.location is not None, "location"), (self.asa is not None, "asa")):
             if flag and not mag:
-                raise CalibrationError(f"{name} applies to the magnetometer (sensor \"mag\"), not "
-                                       f"\"{self.sensor}\"")
+                raise CalibrationError(f"{opt(name)} applies to the magnetometer: it applies to "
+                                       f"{opt('sensor', 'mag')}, not {self.sensor}")
         if self.radius_is_wmm and f.location is None:
-            raise CalibrationError('radius "wmm" (--radius wmm) needs location (--location '
-                                   'LAT,LON[,ALT_M]) and the date of the recording (--date)')
+            raise CalibrationError(f"{opt('radius', 'wmm')} needs "
+                                   f"{opt('location', 'LAT,LON[,ALT_M]')} (and "
+                                   f"{opt('date', 'YYYY-MM-DD')} of the recording; default today)")
         if f.yaw_only and self.radius is not None and not self.radius_is_wmm:
-            raise CalibrationError("yaw_only (--yaw-only) takes the field from the location "
-                                   "(--location, the World Magnetic Model): drop radius "
-                                   "(--radius)")
+            raise CalibrationError(f"{opt('yaw_only')} takes the field from the location "
+                                   f"({opt('location')}, the World Magnetic Model): drop "
+                                   f"{opt('radius')}")
         if f.yaw_only and self.source.poses:
-            raise CalibrationError("yaw_only (--yaw-only) fits the turning readings themselves: "
-                                   "drop poses (--poses)")
+            raise CalibrationError(f"{opt('yaw_only')} fits the turning readings themselves: "
+                                   f"drop {opt('poses')}")
         if f.align and self.source.poses:
-            raise CalibrationError("align (--align) finds the still poses itself: drop poses "
-                                   "(--poses)")
+            raise CalibrationError(f"{opt('align')} finds the still poses itself: drop "
+                                   f"{opt('poses')}")
         if self.bootstrap and self.asa is not None:
-            raise CalibrationError("bootstrap (--bootstrap) with asa (--asa) is not supported: "
-                                   "the intervals would describe the ASA-adjusted coefficients")
+            raise CalibrationError(f"{opt('bootstrap')} with {opt('asa')} is not supported: the "
+                                   "intervals would describe the ASA-adjusted coefficients")
 
     @property
     def radius_is_wmm(self) -> bool:

@@ -6,32 +6,35 @@ whether it was fitted alone or in a batch of thousands. Then the board is judged
 :class:`Limits`; the checks run in this order and every failed one is recorded (the first is the
 main reason):
 
-=================  =============================================================================
-reason             fails when
-=================  =============================================================================
-``unreadable``     the session cannot be read (not a table of numbers, no such columns)
-``dead_axis``      an axis's readings, averaged over blocks of ``window`` samples, span less
-                   than ``dead_axis_ratio`` of the readings' median magnitude (the axis does
-                   not respond to gravity; a board turned through too few orientations still
-                   moves every axis by far more)
-``stuck``          more than ``stuck_max_pct`` % of the rows repeat the previous row exactly
-                   on all three axes (a frozen sensor or bus; noise makes exact repeats rare)
-``saturation``     more than ``saturation_max_pct`` % of the readings of an axis sit at the
-                   full-scale rails, ``|v| >= full_scale`` (raw units)
-``coverage``       the calibrated poses cover less than ``coverage_min_pct`` % of the 24
-                   equal-area cells of the sphere of directions (the ``sphere`` figure of
-                   ``triaxcal capture``'s status line): too few orientations for the model
-``fit_failed``     the fit raised an error (degenerate data, implausible gains ...)
-``too_few_poses``  fewer than ``min_points`` points (poses) were fitted
-``rms``            residual RMS above ``rms_max_pct`` % of the radius
-``noise``          the sensor noise exceeds ``noise_max`` (calibrated units: g rms): within
-                   each still pose the standard deviation of sample-to-sample differences
-                   over sqrt(2), largest axis, median over the poses
-``offset``         an axis's offset exceeds ``offset_max`` (calibrated units: g)
-``gain``           an axis's gain differs from ``1 / counts_per_unit`` by more than
-                   ``gain_max_dev`` (relative; skipped when ``counts_per_unit`` is 0)
-``cross_axis``     ``|offdiag_ij| / sqrt(diag_i diag_j)`` exceeds ``cross_axis_max``
-=================  =============================================================================
+=======================  ===========================================================================
+reason                   fails when
+=======================  ===========================================================================
+``unreadable``           the session cannot be read (not a table of numbers, no such columns)
+``dead_axis``            an axis's readings, averaged over blocks of ``window`` samples, span less
+                         than ``dead_axis_ratio`` of the readings' median magnitude (the axis does
+                         not respond to gravity; a board turned through too few orientations still
+                         moves every axis by far more)
+``stuck``                more than ``stuck_max_pct`` % of the rows repeat the previous row exactly
+                         on all three axes (a frozen sensor or bus; noise makes exact repeats rare)
+``saturation``           more than ``saturation_max_pct`` % of the readings of an axis sit at the
+                         full-scale rails, ``|v| >= full_scale`` (raw units)
+``coverage``             the calibrated poses cover less than ``coverage_min_pct`` % of the 24
+                         equal-area cells of the sphere of directions (the ``sphere`` figure of
+                         ``triaxcal capture``'s status line): too few orientations for the model
+``fit_failed``           the fit raised an error (degenerate data, implausible gains ...)
+``not_a_calibration``    the validity gate refused the fit (:mod:`triaxcal.calibration.gate`:
+                         the same refusal as ``triaxcal fit``); its calibration.json is marked
+                         ``valid: false`` with the reasons
+``too_few_poses``        fewer than ``min_points`` points (poses) were fitted
+``rms``                  residual RMS above ``rms_max_pct`` % of the radius
+``noise``                the sensor noise exceeds ``noise_max`` (calibrated units: g rms): within
+                         each still pose the standard deviation of sample-to-sample differences
+                         over sqrt(2), largest axis, median over the poses
+``offset``               an axis's offset exceeds ``offset_max`` (calibrated units: g)
+``gain``                 an axis's gain differs from ``1 / counts_per_unit`` by more than
+                         ``gain_max_dev`` (relative; skipped when ``counts_per_unit`` is 0)
+``cross_axis``           ``|offdiag_ij| / sqrt(diag_i diag_j)`` exceeds ``cross_axis_max``
+=======================  ===========================================================================
 
 Defaults suit an accelerometer at +-2 g (16384 counts/g, int16 counts) calibrated to g, the
 MPU-6050 class: offsets up to 0.1 g (the datasheet's zero-g tolerance is +-50 mg on X/Y and
@@ -77,7 +80,7 @@ __all__ = [
 
 #: Fail reasons, in the order the checks run.
 REASONS = ("unreadable", "dead_axis", "stuck", "saturation", "coverage", "fit_failed",
-           "too_few_poses", "rms", "noise", "offset", "gain", "cross_axis")
+           "not_a_calibration", "too_few_poses", "rms", "noise", "offset", "gain", "cross_axis")
 
 
 @dataclass(frozen=True)
@@ -280,6 +283,7 @@ def judge(
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
+    from ..calibration.gate import check, judged
     from ..calibration.session import fit_session
     from ..io.tables import pick_columns
 
@@ -297,7 +301,10 @@ def judge(
     part = None
     try:
         outcome = fit_session(table, request)
-        part = outcome.part
+        verdict = check(outcome.part, request.sensor)
+        if not verdict.valid:
+            fails.append(("not_a_calibration", verdict.text("the fit")))
+        part = judged(outcome.part, verdict, force=True)
     except CalibrationError as exc:
         # name the cause when it is a too narrow set of directions
         pts = raw

@@ -107,9 +107,9 @@ class LiveState:
         self.protocol = protocol
         self.port = port
         raw = protocol == "raw"
-        from ..detect.options import default_settings
+        from ..detect.session import PoseSettings
 
-        self.detection = opts.detection if opts.detection is not None else default_settings()
+        self.detection = opts.detection if opts.detection is not None else PoseSettings()
         #: nominal accelerometer counts per g (for display until the data decide it)
         self.nominal_counts_per_g = 8192.0 if raw else 16384.0
         self.gyro_cpd = float(opts.gyro_counts_per_dps or (16.0 if raw else 131.0))
@@ -571,14 +571,14 @@ class LiveState:
 
     def fit_commands(self) -> list[str]:
         """The ``triaxcal fit`` commands that Save runs (on the session as it is)."""
-        from .fitting import fit_argv
+        from .fitting import fit_argv, fit_request
 
         out = str(self.out_dir / "calibration.json")
         cmds = []
         first = True
         for sensor in ("accel", "mag"):
             if sensor in self.cols:
-                argv = fit_argv(self, sensor, str(self.session), out, new=first)
+                argv = fit_argv(fit_request(self, sensor), str(self.session), out, new=first)
                 cmds.append("triaxcal " + " ".join(_quote(a) for a in argv))
                 first = False
         return cmds
@@ -672,7 +672,7 @@ class LiveState:
     def finish(self, result: Any = None) -> None:
         """The capture ended: fit the saved session exactly as ``triaxcal fit`` does (the
         accelerometer with ``--poses``, the magnetometer on every row) and publish that."""
-        from .fitting import fit_session
+        from .fitting import fit_saved_session
 
         self.finish_poses()
         with self._lock:
@@ -681,7 +681,7 @@ class LiveState:
         self.refresh()
         error = None
         try:
-            outcomes = fit_session(self)
+            outcomes = fit_saved_session(self)
         except CalibrationError as exc:
             error = str(exc)
             outcomes = {}

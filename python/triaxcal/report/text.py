@@ -35,9 +35,9 @@ def coefficient_table(part: SensorCalibration, sensor: str) -> list[str]:
       the matrix multiplies: g per count; the offset is in counts, subtracted first
                          x             y             z
       offset           110           -25           400  counts
-      matrix  6.10352e-05             0             0  g/count
-                        0   6.10352e-05             0
-                        0             0   6.10352e-05
+      matrix   6.10352e-05             0             0  g/count
+                         0   6.10352e-05             0
+                         0             0   6.10352e-05
       radius             1 g
     """
     rows = [
