@@ -83,7 +83,7 @@ class _Renamed(argparse.Action):
         print(f"triaxcal: {option_string} is now {self.new}; the old spelling goes in the next "
               "release", file=sys.stderr)
         if self.target is not None:
-            self.target(parser, namespace, values, option_string)
+            self.target(parser, namespace, values, option_string)  # type: ignore[arg-type]
         else:
             setattr(namespace, self.dest, values)
 

@@ -31,12 +31,10 @@ from .ellipsoid import (
 )
 from .select import RobustFit, fit_robust
 
+#: The public names (``triaxcal.__all__`` gathers them); ``FIXABLE``, ``MAX_ITER``,
+#: ``METHODS`` and ``PARAM_NAMES`` stay importable from here.
 __all__ = [
-    "FIXABLE",
-    "MAX_ITER",
-    "METHODS",
     "MODELS",
-    "PARAM_NAMES",
     "AutoFit",
     "BatchFit",
     "Descent",

@@ -283,7 +283,7 @@ def judge(
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
-    from ..calibration.gate import check, judged
+    from ..calibration.gate import check_part, judged
     from ..calibration.session import fit_session
     from ..io.tables import pick_columns
 
@@ -301,10 +301,10 @@ def judge(
     part = None
     try:
         outcome = fit_session(table, request)
-        verdict = check(outcome.part, request.sensor)
-        if not verdict.valid:
-            fails.append(("not_a_calibration", verdict.text("the fit")))
-        part = judged(outcome.part, verdict, force=True)
+        gate = check_part(outcome.part, request.sensor)
+        if not gate.valid:
+            fails.append(("not_a_calibration", gate.text("the fit")))
+        part = judged(outcome.part, gate, force=True)
     except CalibrationError as exc:
         # name the cause when it is a too narrow set of directions
         pts = raw
