@@ -108,13 +108,13 @@ def fit_session(
     fitted = pts
     if req.asa is not None:
         fitted = apply_asa(pts, req.asa)  # adjusted before fitting, folded back below
-    rob = fit_robust(fitted, model=req.model, radius=radius, sigma=req.sigma,
-                     max_rounds=req.rounds, lengths=req.reject_on,
+    rob = fit_robust(fitted, model=req.model, radius=radius, **req.rejection(),
                      fixed=dict(req.fixed) or None)
     extra: dict[str, Any] = {
         "columns": src.columns,
         "poses": bool(req.source.poses),
         "n_input": len(pts),
+        "outliers": req.outliers,
         "sigma": float(req.sigma),
         "rejection_rounds": int(rob.rounds),
     }

@@ -52,8 +52,8 @@ class LiveOptions:
     """How the live page fits, and where its buttons write.
 
     The fit options are ``triaxcal fit``'s, with its defaults: ``model`` (``"auto"``: by BIC),
-    ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius`` (as
-    ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
+    ``outliers``, ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius``
+    (as ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
     ``detection`` (the pose detection of ``capture`` and ``fit --poses``,
     :class:`~triaxcal.detect.session.PoseSettings`; ``None``: the command line's defaults).
     ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
@@ -64,6 +64,7 @@ class LiveOptions:
     """
 
     model: str = "auto"
+    outliers: str = "robust"
     sigma: float = 2.0
     rounds: int = 10
     accel_radius: str = "1g"
@@ -82,6 +83,11 @@ class LiveOptions:
 
         if self.model not in (*MODELS, "auto"):
             raise CalibrationError(f"model must be one of {(*MODELS, 'auto')}, got {self.model!r}")
+        from ..calibration.request import OUTLIER_RULES
+
+        if self.outliers not in OUTLIER_RULES:
+            raise CalibrationError(f"outliers must be one of {OUTLIER_RULES}, got "
+                                   f"{self.outliers!r}")
         if not (isinstance(self.sigma, (int, float)) and self.sigma >= 0):
             raise CalibrationError(f"sigma must be >= 0, got {self.sigma!r}")
         for name, lo in (("rounds", 0), ("mag_buffer", 50)):
