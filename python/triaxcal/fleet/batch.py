@@ -63,6 +63,7 @@ import numpy as np
 from ..calibration.file import Calibration
 from ..calibration.part import SensorCalibration
 from ..calibration.request import FitRequest, SourceOptions
+from ..conventions.names import COEFFICIENTS
 from ..errors import CalibrationError
 from ..quality.coverage import coverage
 
@@ -595,10 +596,8 @@ def batch_fit(
 
 #: Columns of ``summary.csv``, one row per board.
 SUMMARY_COLUMNS = (
-    "id", "verdict", "reasons", "message", "model", "raw_unit", "unit",
-    "offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
-    "offdiag_xy", "offdiag_xz", "offdiag_yz", "radius", "rms", "rms_pct", "coverage_pct",
-    "points", "noise", "cross_axis", "source",
+    "id", "verdict", "reasons", "message", "model", "raw_unit", "unit", *COEFFICIENTS,
+    "radius", "rms", "rms_pct", "coverage_pct", "points", "noise", "cross_axis", "source",
 )
 
 
