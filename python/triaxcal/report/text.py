@@ -11,7 +11,22 @@ import numpy as np
 from ..calibration.part import SensorCalibration
 from ..conventions.units import per_unit
 
-__all__ = ["coefficient_table", "fit_lines", "stderr_lines"]
+__all__ = ["coefficient_table", "fit_lines", "printable", "stderr_lines"]
+
+
+def printable(text: Any, limit: int = 2000) -> str:
+    """``text`` safe for a terminal: control characters (ESC, BEL, CR, CSI ...) shown as
+    ``\\xNN`` escapes, and at most ``limit`` characters -- for text that came from a file.
+
+    >>> printable("ok\\x1b[2Jgone\\a")
+    'ok\\\\x1b[2Jgone\\\\x07'
+    """
+    import unicodedata
+
+    s = str(text)
+    out = "".join(c if c in " \t" or unicodedata.category(c)[0] not in "CZ"
+                  else c.encode("unicode_escape").decode("ascii") for c in s[:limit])
+    return out + ("..." if len(s) > limit else "")
 
 
 def _num(v: float) -> str:
@@ -114,9 +129,9 @@ def fit_lines(saved: Any) -> list[str]:
     if saved.alignment_text:
         lines.append("  " + saved.alignment_text.replace("\n", "\n  "))
     for w in s.get("warnings", []):
-        lines.append(f"  warning: {w}")
+        lines.append(f"  warning: {printable(w)}")
     if out.source is not None and out.source.recording is not None:
         lines += autopilot_lines(out.source, out.sensor, part.offset, part.matrix, part.unit)
         for w in out.source.recording.meta.get("warnings", []):
-            lines.append(f"  warning: {w}")
+            lines.append(f"  warning: {printable(w)}")
     return lines
