@@ -48,6 +48,7 @@ class Physical:
     offset_poly: np.ndarray | None = None
     gain_poly: np.ndarray | None = None
     scale_source: str | None = None
+    composed: bool = False
 
     def apply(self, raw: Any, temperature: Any = None) -> np.ndarray:
         d = np.asarray(raw, float) - self.offset
@@ -87,6 +88,7 @@ def physical(part: SensorCalibration, sensor: str, raw_unit: str, unit: str,
         offset_poly=None if t is None else np.asarray(t.offset_poly) * k,
         gain_poly=None if t is None or t.gain_poly is None else np.asarray(t.gain_poly),
         scale_source=source,
+        composed=bool(part.stats.get("composed_with_autopilot")),
     )
 
 
@@ -119,11 +121,21 @@ def pick_sensors(cal: Calibration, sensors: Iterable[str] | None, supported: tup
     return chosen
 
 
+_COMPOSED = ("; this part is a correction fitted on readings the autopilot had already "
+             "corrected, and the stored calibration followed by the correction has a form "
+             "the parameters cannot hold: fit the raw sensor instead (--undo-autopilot-cal; "
+             "undo_autopilot_cal=True)")
+
+
 def require_diagonal(p: Physical, fmt: str, what: str, *, rel: float = 1e-9) -> np.ndarray:
     """The diagonal of ``p.matrix``; refuses any off-diagonal term a per-axis format drops."""
     m = p.matrix
     off = np.abs(m - np.diag(np.diag(m))).max()
     if off > rel * np.abs(np.diag(m)).max():
+        if p.composed:
+            raise CalibrationError(
+                f"{fmt} stores only per-axis {p.sensor} scales ({what}); the composed "
+                f"calibration has cross-axis terms up to {off:.3g}" + _COMPOSED)
         raise CalibrationError(
             f"{fmt} stores only per-axis {p.sensor} scales ({what}); this calibration has "
             f"cross-axis terms up to {off:.3g} {per_unit(p.unit, p.raw_unit)} that it would drop: "
@@ -147,6 +159,11 @@ def require_symmetric(p: Physical, fmt: str, *, rel: float = 1e-12) -> None:
     m = p.matrix
     asym = np.abs(m - m.T).max()
     if asym > rel * np.abs(m).max():
+        if p.composed:
+            raise CalibrationError(
+                f"{fmt} stores a symmetric {p.sensor} matrix; the composed calibration's "
+                f"matrix (the stored one times the fitted correction) is not symmetric (differs "
+                f"by {asym:.3g})" + _COMPOSED)
         raise CalibrationError(
             f"{fmt} stores a symmetric {p.sensor} matrix (one value per off-diagonal pair); "
             f"this calibration's matrix is not symmetric (differs by {asym:.3g}): refit with "

@@ -195,9 +195,10 @@ def absolute(part: SensorCalibration, sensor: str) -> tuple[SensorCalibration, s
     refit = ("fit the raw sensor instead (--undo-autopilot-cal; undo_autopilot_cal=True), or "
              "the per-sensor topic (--instance N)")
     if corrected is None:
+        who = ap.get("autopilot", "the autopilot") if ap is not None else "the autopilot"
         raise CalibrationError(
             f"the {sensor} part was fitted on a {log.get('format', 'log')} stream that may or may "
-            f"not have been corrected by {ap.get('autopilot', 'the autopilot')} already (the log "
+            f"not have been corrected by {who} already (the log "
             "does not say): whether it is a correction or the sensor's calibration cannot be "
             f"told, so it is not exported; {refit}")
     if ap is None:

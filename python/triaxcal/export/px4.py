@@ -79,7 +79,7 @@ def _device_id(device_ids: Mapping[str, Any] | None, sensor: str,
     if device_ids and device_ids.get(sensor) is not None:
         return _check_id(device_ids[sensor], sensor), "given"
     stats = getattr(part, "stats", None) or {}
-    log = stats.get("log") if isinstance(stats.get("log"), Mapping) else {}
+    log: Mapping[str, Any] = stats["log"] if isinstance(stats.get("log"), Mapping) else {}
     v = log.get("device_id") if log.get("format") == "px4-ulog" else None
     if v is None and isinstance(stats.get("autopilot"), Mapping):
         ap = stats["autopilot"]
