@@ -157,10 +157,12 @@ def run_demo(
         if live is not None:
             from ..live import LiveOptions
             from ..live.run import LivePage
+            from ..sim import SIM_COUNTS_PER_UNIT
 
             page = LivePage(reader, session, columns=channel_names(protocol, channels),
                             options=LiveOptions(mag_radius=f"{imu.truth.field_ut:g}uT",
-                                                out_dir=out / "live", detection=settings),
+                                                out_dir=out / "live", detection=settings,
+                                                counts_per_unit=SIM_COUNTS_PER_UNIT),
                             host=live["host"], port=live["port"],
                             open_browser=live["open_browser"], progress=progress,
                             mode="overwrite").start()
@@ -293,8 +295,11 @@ def _analyse(out: Path, session: Path, protocol: str, speed: float, seed: int, p
         mag=part(mag_fit, m_cols, "uT"),
         sensor_id=f"triaxcal-sim-seed{seed}",
     )
+    from ..sim import SIM_COUNTS_PER_UNIT
+
     outputs = write_outputs(
-        cal, {"accel": means[:, a_cols], "mag": means[:, m_cols]}, out, plot=plot
+        cal, {"accel": means[:, a_cols], "mag": means[:, m_cols]}, out, plot=plot,
+        counts_per_unit=SIM_COUNTS_PER_UNIT,  # the simulated board's driver scale
     )
     results["outputs"] = {k: str(v) for k, v in outputs.items()}
     path = out / "results.json"

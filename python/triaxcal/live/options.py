@@ -61,6 +61,10 @@ class LiveOptions:
     buffer of well-spread samples; ``refresh_hz`` how often the background thread refits and
     publishes. ``out_dir`` (default: the session's folder) receives ``calibration.json`` and
     the C headers, named with ``prefix``; ``send_timeout_s`` bounds the wait for a board's echo.
+    ``counts_per_unit`` (``{"accel": (16384, "g")}``) and ``sensor_model`` (part names such as
+    ``"MPU-6050:2g,250dps"``) give the board driver's scale for Send (the MotionCal packet is
+    in m/s^2, rad/s and uT); without them only ``Raw:`` lines, whose format fixes the scale,
+    can be sent.
     """
 
     model: str = "auto"
@@ -76,6 +80,8 @@ class LiveOptions:
     out_dir: Path | None = None
     prefix: str = "triaxcal"
     send_timeout_s: float = 3.0
+    counts_per_unit: Any = None
+    sensor_model: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         from ..calibration.request import parse_radius
@@ -108,6 +114,11 @@ class LiveOptions:
         if not (isinstance(self.send_timeout_s, (int, float)) and self.send_timeout_s > 0):
             raise CalibrationError(f"send_timeout_s must be > 0, got {self.send_timeout_s!r}")
         _ident(self.prefix)
+        from ..export._trust import Scales
+
+        if isinstance(self.sensor_model, str):
+            object.__setattr__(self, "sensor_model", (self.sensor_model,))
+        Scales(self.counts_per_unit, tuple(self.sensor_model))  # checked now, not at Send
 
 
 def _jsonable(obj: Any) -> Any:
