@@ -11,7 +11,6 @@ import json
 
 import numpy as np
 import pytest
-
 import triaxcal as tc
 from triaxcal import sim
 from triaxcal.calibration.gate import InvalidCalibrationError, check_part, require_valid

@@ -9,7 +9,6 @@ import ast
 from pathlib import Path
 
 import pytest
-
 import triaxcal
 
 PKG = Path(triaxcal.__file__).parent
