@@ -16,38 +16,11 @@ from .calibration import *  # noqa: F403
 from .conventions import rotations
 from .detect import *  # noqa: F403
 from .errors import *  # noqa: F403
-from .export import (
-    adafruit_calib_json,
-    ardupilot_parm,
-    c_fixed_header,
-    c_header,
-    decode_motioncal,
-    encode_motioncal,
-    js_module,
-    kalibr_imu_yaml,
-    motioncal_packet,
-    px4_params_file,
-    write_outputs,
-)
+from .export import *  # noqa: F403
 from .fit import *  # noqa: F403
 from .io import *  # noqa: F403
 from .methods import *  # noqa: F403
 from .report import *  # noqa: F403
-
-#: The exports' public names (the export package lists more in its own ``__all__``).
-_EXPORT_NAMES = [
-    "adafruit_calib_json",
-    "ardupilot_parm",
-    "c_fixed_header",
-    "c_header",
-    "decode_motioncal",
-    "encode_motioncal",
-    "js_module",
-    "kalibr_imu_yaml",
-    "motioncal_packet",
-    "px4_params_file",
-    "write_outputs",
-]
 
 __all__ = ["__version__", "rotations", "sim"]
 __all__ += errors.__all__
@@ -57,4 +30,4 @@ __all__ += fit.__all__
 __all__ += methods.__all__
 __all__ += calibration.__all__
 __all__ += report.__all__
-__all__ += _EXPORT_NAMES
+__all__ += export.__all__

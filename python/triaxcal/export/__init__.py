@@ -61,39 +61,20 @@ from .kalibr import KALIBR_MODELS, KALIBR_NOISE_KEYS, kalibr_imu_yaml, kalibr_in
 from .motioncal import motioncal_losses, motioncal_packet
 from .px4 import px4_omitted, px4_params, px4_params_file
 
+#: The public names (``triaxcal.__all__`` gathers them); the formats' helpers (the parameter
+#: dicts, the fixed-point and MotionCal pieces, ``EXPORT_FORMATS``, :func:`export` itself) stay
+#: importable from here (``export`` is not gathered: it would hide this package at the top).
 __all__ = [
-    "KALIBR_MODELS",
-    "KALIBR_NOISE_KEYS",
-    "adafruit_calib",
     "adafruit_calib_json",
-    "adafruit_left_out",
-    "exported_sensors",
-    "parse_counts_per_unit",
-    "px4_omitted",
-    "ardupilot_params",
     "ardupilot_parm",
-    "kalibr_imu_yaml",
-    "kalibr_intrinsics",
-    "px4_params",
-    "px4_params_file",
-    "DEFAULT_COUNT_UNIT",
-    "EXPORT_FORMATS",
-    "FixedPoint",
-    "MotionCalPacket",
-    "apply_fixed",
     "c_fixed_header",
     "c_header",
-    "crc16_modbus",
     "decode_motioncal",
-    "echo_matches",
     "encode_motioncal",
-    "export",
-    "fixed_point",
     "js_module",
-    "motioncal_losses",
+    "kalibr_imu_yaml",
     "motioncal_packet",
-    "parse_motioncal_echo",
-    "unit_factor",
+    "px4_params_file",
     "write_outputs",
 ]
 
