@@ -205,7 +205,8 @@ def write_outputs(
     sensor in ``points_by_sensor`` (raw (N, 3) readings) ``report_<sensor>.txt`` and, when
     ``plot`` and matplotlib is installed, ``report_<sensor>.png``.
     """
-    from .. import report as _report
+    from ..report.figure import plot_report
+    from ..report.quality import have_matplotlib, quality_report
 
     out = Path(out_dir)
     try:
@@ -226,12 +227,12 @@ def write_outputs(
     for sensor, pts in (points_by_sensor or {}).items():
         if sensor not in SENSORS or getattr(cal, sensor) is None:
             continue
-        rep = _report.quality_report(pts, cal.part(sensor), sensor=sensor)
+        rep = quality_report(pts, cal.part(sensor), sensor=sensor)
         txt = out / f"report_{sensor}.txt"
         write_file(txt, rep.text() + "\n", what="report")
         paths[f"report_{sensor}"] = txt
-        if plot and _report.have_matplotlib():
-            paths[f"figure_{sensor}"] = _report.plot_report(
+        if plot and have_matplotlib():
+            paths[f"figure_{sensor}"] = plot_report(
                 pts, cal.part(sensor), out / f"report_{sensor}.png", report=rep
             )
     return paths
