@@ -5,6 +5,7 @@
 #include "nvstore.h"
 #include "triaxcal.h"
 
+TC_POSES_STORAGE(pose_store, CAL_POSES);
 static struct tc_poses poses;
 static uint8_t cal_ok; /* storage holds a good record */
 static uint8_t applying;
@@ -22,14 +23,14 @@ static void load(void)
 
 void cal_init(void)
 {
-    tc_poses_init(&poses);
+    tc_poses_init(&poses, pose_store, CAL_POSES);
     applying = 0;
     load();
 }
 
 void cal_start(void)
 {
-    tc_poses_init(&poses);
+    tc_poses_init(&poses, pose_store, CAL_POSES);
     fitted_this_run = 0;
 }
 

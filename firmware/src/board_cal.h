@@ -1,6 +1,6 @@
 /* The board calibrates itself (mode 'S' end to end, the seed's sensors_calibrate_program):
  * the accelerometer means of the poses the still detector registers go into a pose buffer
- * (tc_poses, TC_POSES_MAX = 84); after the 84th pose (or on the command 'c') the board runs
+ * (tc_poses) of CAL_POSES; after the 84th pose (or on the command 'c') the board runs
  * the seed's centre search and the offset + 3 gains fit of the triaxcal library, stores the
  * fit as a record with version and CRC (tc_store.h) in non-volatile storage (nvstore.h), and
  * from then on applies it to the accelerometer counts of the streams ('A' / 'a' switch it on
@@ -16,6 +16,12 @@
 #include "triaxcal_config.h"
 
 #define CAL_AUTO_POSES 84 /* the seed's globe: fit after this many poses */
+#ifndef CAL_POSES
+/* Poses held (12 bytes of RAM each): the ATmega328P's 2 KB hold 60 beside the protocol, the
+ * still detector and the deepest stack of a fit (firmware/README.md). The globe's 84 repeat
+ * each pole 12 times; the buffer keeps the 60 that cover the sphere best. */
+#define CAL_POSES 60
+#endif
 #define CAL_RADIUS 16384  /* counts per g at +-2 g: the magnitude calibrated counts have */
 
 /* Read the stored record (at boot); the streams stay raw until 'A' or a fit. */

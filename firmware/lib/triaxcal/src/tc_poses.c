@@ -4,7 +4,12 @@
 
 #include "tc_internal.h"
 
-void tc_poses_init(struct tc_poses *b) { memset(b, 0, sizeof *b); }
+void tc_poses_init(struct tc_poses *b, tc_real (*storage)[3], uint16_t capacity)
+{
+    memset(b, 0, sizeof *b);
+    b->p = storage;
+    b->capacity = capacity;
+}
 
 void tc_pose_accel(const struct still_pose *pose, tc_real out[3])
 {
@@ -64,7 +69,8 @@ int16_t tc_poses_add(struct tc_poses *b, const tc_real p[3])
         if (!tc_finite(p[k])) return TC_POSE_DROPPED; /* never store what cannot be fitted */
     }
     if (b->seen < UINT16_MAX) b->seen++;
-    if (b->n < TC_POSES_MAX) {
+    if (b->capacity < 3) return TC_POSE_DROPPED; /* no pair to choose between */
+    if (b->n < b->capacity) {
         for (k = 0; k < 3; k++) b->p[b->n][k] = p[k];
         return (int16_t)b->n++;
     }

@@ -100,22 +100,30 @@ enum tc_code {
 
 /* ------------------------------------------------------------------------ the poses */
 
-/* Pose means (raw units), at most TC_POSES_MAX. Until it is full every pose is kept, in the
+/* Pose means (raw units) in storage the caller provides (TC_POSES_STORAGE sizes it at
+ * compile time; 12 bytes per pose in float). Until it is full every pose is kept, in the
  * order given; once full, a new pose takes the place of one of the two stored poses closest
  * to each other if it is farther from every stored pose than those two are from each other,
  * and is dropped otherwise: the smallest distance between stored poses never shrinks, so the
  * buffer keeps the poses that cover the sphere best (distances between raw readings stand for
- * angles: all lie on one ellipsoid). */
+ * angles: all lie on one ellipsoid). The seed's globe (84 poses) repeats each pole 12 times
+ * (the twists about the vertical look alike to an accelerometer): a buffer of 62 holds every
+ * direction it has. */
 struct tc_poses {
-    tc_real p[TC_POSES_MAX][3];
+    tc_real (*p)[3];   /* the storage: p[0 .. capacity-1] */
+    uint16_t capacity;
     uint16_t n;        /* poses held */
     uint16_t seen;     /* poses offered since tc_poses_init */
     uint16_t replaced; /* offered when full and kept in place of another */
 };
 
+/* static storage for `count` poses, named `name`: TC_POSES_STORAGE(store, 84); then
+ * tc_poses_init(&buf, store, 84) */
+#define TC_POSES_STORAGE(name, count) static tc_real name[count][3]
+
 #define TC_POSE_DROPPED (-1)
 
-void tc_poses_init(struct tc_poses *b);
+void tc_poses_init(struct tc_poses *b, tc_real (*storage)[3], uint16_t capacity);
 /* Offer a pose; returns the slot it went into, or TC_POSE_DROPPED. */
 int16_t tc_poses_add(struct tc_poses *b, const tc_real p[3]);
 /* The accelerometer means (channels 0-2) of a pose of the still detector, raw counts. */

@@ -28,6 +28,8 @@ void tcv_init(void)
     SYST_RVR = 0x00FFFFFFu;
     SYST_CVR = 0;
     SYST_CSR = 7u; /* processor clock, interrupt, enable */
+    while (SYST_CVR == 0) { /* the first reload: from here on every wrap is counted */
+    }
 }
 
 void tcv_putc(char c) { semihost(0x03, &c); } /* SYS_WRITEC */

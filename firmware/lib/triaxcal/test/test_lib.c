@@ -44,8 +44,7 @@
 
 static uint16_t checks, failures;
 static union {
-    tc_real pts[TCV_MAXN][3];
-    struct tc_poses poses;
+    tc_real pts[TCV_MAXN][3]; /* a case's points, or the pose buffer's storage */
 } mem;
 static struct tcv_case cs;
 
@@ -389,14 +388,16 @@ static void unit(tc_real u[3])
     }
 }
 
+#define CAP TCV_MAXN /* poses in the buffer under test */
+
 static void pose_buffer(void)
 {
-    struct tc_poses *b = &mem.poses;
-    have_case = 0xFF;
-    tc_poses_init(b);
+    struct tc_poses buf, *b = &buf;
+    have_case = 0xFF; /* the storage is the case's: forget it */
+    tc_poses_init(b, mem.pts, CAP);
     tc_real p[3];
-    /* first a crowd: TC_POSES_MAX poses within about 25 degrees of +Z */
-    while (b->n < TC_POSES_MAX) {
+    /* first a crowd: CAP poses within about 25 degrees of +Z */
+    while (b->n < CAP) {
         unit(p);
         if (p[2] < TC_R(0.9)) continue;
         for (uint8_t k = 0; k < 3; k++) p[k] = 100 + 16384 * p[k];
@@ -406,7 +407,7 @@ static void pose_buffer(void)
     uint8_t never_shrinks = 1;
     uint16_t kept = 0;
     /* then poses from everywhere: the buffer spreads out over the sphere */
-    for (uint16_t i = 0; i < 3 * TC_POSES_MAX; i++) {
+    for (uint16_t i = 0; i < 3 * CAP; i++) {
         unit(p);
         for (uint8_t k = 0; k < 3; k++) p[k] = 100 + 16384 * p[k];
         if (tc_poses_add(b, p) != TC_POSE_DROPPED) kept++;
@@ -414,7 +415,7 @@ static void pose_buffer(void)
         if (g < gap) never_shrinks = 0;
         gap = g;
     }
-    check(b->n == TC_POSES_MAX && b->replaced == kept && kept > 0, TCV_STR("poses: counts"));
+    check(b->n == CAP && b->replaced == kept && kept > 0, TCV_STR("poses: counts"));
     check(never_shrinks, TCV_STR("poses: the smallest gap never shrinks"));
     uint16_t faces[6] = {0, 0, 0, 0, 0, 0};
     for (uint16_t i = 0; i < b->n; i++) {
@@ -426,12 +427,12 @@ static void pose_buffer(void)
     }
     uint8_t all = 1;
     for (uint8_t k = 0; k < 6; k++) {
-        if (faces[k] < TC_POSES_MAX / 24) all = 0;
+        if (faces[k] < CAP / 24) all = 0;
     }
     tcv_puts(TCV_STR("poses: kept "));
     put_int(kept);
     tcv_puts(TCV_STR(" of "));
-    put_int(3 * TC_POSES_MAX);
+    put_int(3 * CAP);
     tcv_puts(TCV_STR(", faces"));
     for (uint8_t k = 0; k < 6; k++) {
         tcv_putc(' ');
@@ -501,8 +502,8 @@ int main(void)
     tcv_init();
     tcv_puts(TCV_STR("triaxcal C library: "));
     tcv_puts(TC_DOUBLE ? TCV_STR("double") : TCV_STR("float"));
-    tcv_puts(TCV_STR(", TC_POSES_MAX "));
-    put_int(TC_POSES_MAX);
+    tcv_puts(TCV_STR(", TC_FIT_MAX_P "));
+    put_int(TC_FIT_MAX_P);
     tcv_putc('\n');
 #if TCV_VECTORS
     against_the_core();
