@@ -72,11 +72,9 @@ static void descend(const tc_real (*pts)[3], struct proto_quality *q)
     q->descent_iterations = d.iterations > 65535u ? 65535u : (uint16_t)d.iterations;
 }
 
-/* Store the record of a fit made on the board (its bytes are not on the stack during the
- * fit, whose stack is the deepest). */
-static uint8_t store_fit(const struct tc_fit *f)
+/* The record of a fit made on the board, as its bytes. */
+static void record_of(const struct tc_fit *f, uint8_t b[TC_STORE_BYTES])
 {
-    uint8_t b[TC_STORE_BYTES];
     struct tc_record r;
     memset(&r, 0, sizeof r);
     r.sensor = TC_STORE_SENSOR_ACCEL;
@@ -92,6 +90,14 @@ static uint8_t store_fit(const struct tc_fit *f)
     r.rms = (float)f->rms;
     r.spread = (float)f->spread;
     tc_store_pack(&r, b);
+}
+
+/* Store a fit made on the board (the record is built in a frame of its own, gone before the
+ * bytes are written and checked: the stack stays within the fit's own depth). */
+static uint8_t store_fit(const struct tc_fit *f)
+{
+    uint8_t b[TC_STORE_BYTES];
+    record_of(f, b);
     return store(b);
 }
 

@@ -88,23 +88,25 @@ void proto_send_binary(const int16_t *values, uint8_t k)
     put('\n');
 }
 
-/* COBS(seq, payload, CRC-16/CCITT-FALSE LE) + 0x00; n <= PROTO_FRAME_MAX bytes (the
- * longest: a 'K' frame, 3 + TC_STORE_BYTES). */
+/* COBS(seq, head, body, CRC-16/CCITT-FALSE LE) + 0x00; hn + bn <= PROTO_FRAME_MAX bytes (the
+ * longest: a 'K' frame, 3 + TC_STORE_BYTES). Head and body are separate so that a record is
+ * sent from where it lies, without a copy on the stack. */
 #define PROTO_FRAME_MAX (3 + TC_STORE_BYTES)
-static void send_frame(const uint8_t *payload, uint8_t n)
+static void send_frame2(const uint8_t *head, uint8_t hn, const uint8_t *body, uint8_t bn)
 {
     uint8_t raw[1 + PROTO_FRAME_MAX + 2];
-    uint8_t enc[sizeof raw + sizeof raw / 254 + 1];
-    uint8_t m = 0;
+    uint8_t m = 0, i;
     raw[m++] = seq++;
-    for (uint8_t i = 0; i < n; i++) raw[m++] = payload[i];
+    for (i = 0; i < hn; i++) raw[m++] = head[i];
+    for (i = 0; i < bn; i++) raw[m++] = body[i];
     uint16_t crc = crc16_ccitt(raw, m);
     raw[m++] = (uint8_t)(crc & 0xFF);
     raw[m++] = (uint8_t)(crc >> 8);
-    uint16_t len = cobs_encode(raw, m, enc);
-    for (uint16_t i = 0; i < len; i++) put(enc[i]);
+    cobs_write(raw, m, put);
     put(0);
 }
+
+static void send_frame(const uint8_t *payload, uint8_t n) { send_frame2(payload, n, 0, 0); }
 
 static uint8_t put_le(uint8_t *p, uint32_t v, uint8_t bytes)
 {
@@ -161,12 +163,8 @@ void proto_send_settings(uint8_t accepted, const struct still_settings *s)
 
 void proto_send_record(uint8_t status, uint8_t flags, const uint8_t record[TC_STORE_BYTES])
 {
-    uint8_t payload[3 + TC_STORE_BYTES];
-    payload[0] = PROTO_FRAME_RECORD;
-    payload[1] = status;
-    payload[2] = flags;
-    memcpy(payload + 3, record, TC_STORE_BYTES);
-    send_frame(payload, sizeof payload);
+    const uint8_t head[3] = {PROTO_FRAME_RECORD, status, flags};
+    send_frame2(head, sizeof head, record, TC_STORE_BYTES);
 }
 
 static uint8_t put_f32(uint8_t *p, float v)

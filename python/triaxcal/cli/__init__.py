@@ -15,7 +15,7 @@ from ._help import PlainHelpFormatter
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ("demo", "capture", "fit", "batch", "export", "report", "send", "sphere_center",
-            "tilt_rig", "gyro_gains", "temperature", "noise", "diff")
+            "tilt_rig", "gyro_gains", "temperature", "noise", "diff", "board")
 
 
 def build_parser() -> argparse.ArgumentParser:
