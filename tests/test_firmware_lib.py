@@ -332,4 +332,5 @@ def test_arduino_library_example_compiles(tmp_path):
     assert (tmp_path / "libsketch" / "calibrate_mpu6050.elf").is_file()
     flash = int(re.search(r"Program:\s+(\d+) bytes", out).group(1))
     ram = int(re.search(r"Data:\s+(\d+) bytes", out).group(1))
-    assert flash < 32256 and ram < 1700, (flash, ram)  # Uno: Optiboot's 512 B; room for stack
+    # an Uno: 32 KB less Optiboot's 512 B; 2 KB of RAM of which a fit's stack takes about 480 B
+    assert flash < 32256 and ram < 1500, (flash, ram)

@@ -4,6 +4,14 @@
 
 #include "triaxcal.h"
 
+/* Float code is large on an 8-bit AVR (every operation a call with its operands moved into
+ * place): the library's own functions are not inlined there, which keeps it about 2 KB
+ * smaller whatever flags the build uses (the Arduino IDE's -Os inlines). Only the library's
+ * .c files include this header, so a sketch's code is not affected. */
+#if defined(__AVR__) && defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("no-inline")
+#endif
+
 /* Packed lower triangle of a symmetric P x P matrix: element (i, j), j <= i. */
 #define TC_PK(i, j) ((uint8_t)((uint8_t)((i) * ((i) + 1u) / 2u) + (j)))
 #define TC_PACKED(p) ((uint8_t)((p) * ((p) + 1u) / 2u))
