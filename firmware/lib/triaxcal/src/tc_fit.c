@@ -264,6 +264,7 @@ static int8_t finish(const tc_real (*pts)[3], uint16_t n, struct frame *fr, cons
             if (g > ghi) ghi = g;
         }
     } else {
+#if P_MAX == 9
         tc_real lo, hi;
         tc_sym3_extremes(th + 3, &lo, &hi); /* theta's xx yy zz xy xz yz */
         tc_real mid = th[3] + th[4] + th[5] - lo - hi;
@@ -273,6 +274,9 @@ static int8_t finish(const tc_real (*pts)[3], uint16_t n, struct frame *fr, cons
         if (tc_abs(hi) < glo) glo = tc_abs(hi);
         if (tc_abs(mid) > ghi) ghi = tc_abs(mid);
         if (tc_abs(hi) > ghi) ghi = tc_abs(hi);
+#else
+        return TC_ERR_MODEL; /* not reached: tc_fit refuses the full model first */
+#endif
     }
     if (!(glo > TC_R(1e-9) * ghi) || !tc_finite(ghi)) return TC_ERR_NOT_DETERMINED;
     /* the sums at the solution: J^T J for the conditioning, the cost, the coverage */
