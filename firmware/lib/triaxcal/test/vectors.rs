@@ -44,7 +44,13 @@ impl Rng {
 }
 
 /// `offset + minv u + noise`, rounded to float32.
-fn reading(u: [f64; 3], offset: [f64; 3], minv: [[f64; 3]; 3], noise: f64, rng: &mut Rng) -> [f64; 3] {
+fn reading(
+    u: [f64; 3],
+    offset: [f64; 3],
+    minv: [[f64; 3]; 3],
+    noise: f64,
+    rng: &mut Rng,
+) -> [f64; 3] {
     let mut p = [0.0; 3];
     for i in 0..3 {
         let v = offset[i] + minv[i][0] * u[0] + minv[i][1] * u[1] + minv[i][2] * u[2];
@@ -74,7 +80,11 @@ fn seed_opts() -> DescentOptions {
 }
 
 fn scaled_opts(step: f64, min_step: f64) -> DescentOptions {
-    DescentOptions { step, min_step, ..DescentOptions::default() }
+    DescentOptions {
+        step,
+        min_step,
+        ..DescentOptions::default()
+    }
 }
 
 fn cases() -> Vec<Case> {
@@ -82,7 +92,11 @@ fn cases() -> Vec<Case> {
     let mut rng = Rng(0x5eed_1234_abcd_ef01);
     // The seed's globe: 7 latitudes x 12 turns, pose means of an MPU-6050 at +-2 g (noise of
     // a mean of 100 samples), small cross-axis terms.
-    let minv = [[16630.0, 40.0, -25.0], [40.0, 16120.0, 31.0], [-25.0, 31.0, 16450.0]];
+    let minv = [
+        [16630.0, 40.0, -25.0],
+        [40.0, 16120.0, 31.0],
+        [-25.0, 31.0, 16450.0],
+    ];
     let mut pts = Vec::new();
     for lat in 0..7 {
         for turn in 0..12 {
@@ -90,7 +104,12 @@ fn cases() -> Vec<Case> {
             pts.push(reading(u, [180.0, -240.0, 350.0], minv, 0.3, &mut rng));
         }
     }
-    out.push(Case { name: "globe84", points: pts, radius: 16384.0, descent: seed_opts() });
+    out.push(Case {
+        name: "globe84",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
     // 26 directions (the cube's faces, edges and corners), single noisy samples
     let mut pts = Vec::new();
     for x in -1..=1 {
@@ -101,101 +120,252 @@ fn cases() -> Vec<Case> {
                 }
                 let n = ((x * x + y * y + z * z) as f64).sqrt();
                 let u = [x as f64 / n, y as f64 / n, z as f64 / n];
-                pts.push(reading(u, [-512.0, 300.0, 45.0], diag([16400.0, 16300.0, 16500.0]),
-                                 3.0, &mut rng));
+                pts.push(reading(
+                    u,
+                    [-512.0, 300.0, 45.0],
+                    diag([16400.0, 16300.0, 16500.0]),
+                    3.0,
+                    &mut rng,
+                ));
             }
         }
     }
-    out.push(Case { name: "cube26", points: pts, radius: 16384.0, descent: seed_opts() });
+    out.push(Case {
+        name: "cube26",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
     // a magnetometer in uT: hard and soft iron, random directions
     let field = 48.0;
     let si = [[1.05, 0.04, -0.02], [0.04, 0.97, 0.03], [-0.02, 0.03, 1.01]];
     let minv = si.map(|r| r.map(|v| v * field));
-    let pts = (0..60).map(|_| {
-        let u = rng.unit();
-        reading(u, [12.5, -30.25, 45.0], minv, 0.4, &mut rng)
-    }).collect();
-    out.push(Case { name: "mag60", points: pts, radius: field, descent: scaled_opts(10.0, 1e-4) });
-    // an accelerometer in g
-    let pts = (0..40).map(|_| {
-        let u = rng.unit();
-        reading(u, [0.02, -0.015, 0.03], diag([1.02, 0.98, 1.01]), 0.002, &mut rng)
-    }).collect();
-    out.push(Case { name: "accel_g40", points: pts, radius: 1.0, descent: scaled_opts(0.1, 1e-6) });
-    // the fixed-step descent of the seed's first listing (step 1 count)
-    let pts = (0..30).map(|_| {
-        let u = rng.unit();
-        reading(u, [31.0, -17.0, 8.0], diag([16384.0; 3]), 2.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "fixed_step", points: pts, radius: 16384.0,
-                    descent: scaled_opts(1.0, 1.0) });
-    // a cap: directions within 60 degrees of +Z only
-    let pts = (0..30).map(|_| {
-        let mut u = rng.unit();
-        u[2] = u[2].abs() * 0.5 + 0.5;
-        let r = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
-        let u = u.map(|v| v / r);
-        reading(u, [100.0, 50.0, -80.0], diag([16500.0, 16250.0, 16400.0]), 2.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "cap", points: pts, radius: 16384.0, descent: seed_opts() });
-    // a band: within 8 degrees of the equator
-    let pts = (0..36).map(|i| {
-        let u = sph(8.0 * (2.0 * rng.next() - 1.0), 10.0 * i as f64);
-        reading(u, [100.0, 50.0, -80.0], diag([16500.0, 16250.0, 16400.0]), 2.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "band", points: pts, radius: 16384.0, descent: seed_opts() });
-    // a band of 1 degree: the full model's gains along z are not determined
-    let pts = (0..36).map(|i| {
-        let u = sph(1.0 * (2.0 * rng.next() - 1.0), 10.0 * i as f64);
-        reading(u, [100.0, 50.0, -80.0], diag([16500.0, 16250.0, 16400.0]), 2.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "band1", points: pts, radius: 16384.0, descent: seed_opts() });
-    // a cap of 20 degrees
-    let pts = (0..30).map(|_| {
-        let mut u = rng.unit();
-        u[2] = u[2].abs() * 0.06 + 0.94;
-        let r = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
-        let u = u.map(|v| v / r);
-        reading(u, [100.0, 50.0, -80.0], diag([16500.0, 16250.0, 16400.0]), 2.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "cap20", points: pts, radius: 16384.0, descent: seed_opts() });
-    // a sensor turned about its z axis only: the points lie on a plane
-    let pts = (0..24).map(|i| {
-        let u = sph(20.0, 15.0 * i as f64);
-        reading(u, [0.0, 0.0, 0.0], diag([16384.0; 3]), 0.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "plane", points: pts, radius: 16384.0, descent: seed_opts() });
-    let pts = (0..12).map(|i| [1000.0 * i as f64, 500.0 * i as f64 - 3000.0, 250.0]).collect();
-    out.push(Case { name: "line", points: pts, radius: 16384.0, descent: seed_opts() });
-    let pts = vec![[120.0, -44.0, 16000.0]; 10];
-    out.push(Case { name: "same", points: pts, radius: 16384.0, descent: seed_opts() });
-    // the six faces of a cube less one, then the six faces plus two corners
-    let faces = [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0],
-                 [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
-    let d = diag([16420.0, 16350.0, 16300.0]);
-    let pts = faces[..5].iter().map(|&u| reading(u, [60.0, -90.0, 30.0], d, 1.0, &mut rng))
+    let pts = (0..60)
+        .map(|_| {
+            let u = rng.unit();
+            reading(u, [12.5, -30.25, 45.0], minv, 0.4, &mut rng)
+        })
         .collect();
-    out.push(Case { name: "five", points: pts, radius: 16384.0, descent: seed_opts() });
-    let mut pts: Vec<[f64; 3]> =
-        faces.iter().map(|&u| reading(u, [60.0, -90.0, 30.0], d, 1.0, &mut rng)).collect();
+    out.push(Case {
+        name: "mag60",
+        points: pts,
+        radius: field,
+        descent: scaled_opts(10.0, 1e-4),
+    });
+    // an accelerometer in g
+    let pts = (0..40)
+        .map(|_| {
+            let u = rng.unit();
+            reading(
+                u,
+                [0.02, -0.015, 0.03],
+                diag([1.02, 0.98, 1.01]),
+                0.002,
+                &mut rng,
+            )
+        })
+        .collect();
+    out.push(Case {
+        name: "accel_g40",
+        points: pts,
+        radius: 1.0,
+        descent: scaled_opts(0.1, 1e-6),
+    });
+    // the fixed-step descent of the seed's first listing (step 1 count)
+    let pts = (0..30)
+        .map(|_| {
+            let u = rng.unit();
+            reading(u, [31.0, -17.0, 8.0], diag([16384.0; 3]), 2.0, &mut rng)
+        })
+        .collect();
+    out.push(Case {
+        name: "fixed_step",
+        points: pts,
+        radius: 16384.0,
+        descent: scaled_opts(1.0, 1.0),
+    });
+    // a cap: directions within 60 degrees of +Z only
+    let pts = (0..30)
+        .map(|_| {
+            let mut u = rng.unit();
+            u[2] = u[2].abs() * 0.5 + 0.5;
+            let r = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+            let u = u.map(|v| v / r);
+            reading(
+                u,
+                [100.0, 50.0, -80.0],
+                diag([16500.0, 16250.0, 16400.0]),
+                2.0,
+                &mut rng,
+            )
+        })
+        .collect();
+    out.push(Case {
+        name: "cap",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    // a band: within 8 degrees of the equator
+    let pts = (0..36)
+        .map(|i| {
+            let u = sph(8.0 * (2.0 * rng.next() - 1.0), 10.0 * i as f64);
+            reading(
+                u,
+                [100.0, 50.0, -80.0],
+                diag([16500.0, 16250.0, 16400.0]),
+                2.0,
+                &mut rng,
+            )
+        })
+        .collect();
+    out.push(Case {
+        name: "band",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    // a band of 1 degree: the full model's gains along z are not determined
+    let pts = (0..36)
+        .map(|i| {
+            let u = sph(1.0 * (2.0 * rng.next() - 1.0), 10.0 * i as f64);
+            reading(
+                u,
+                [100.0, 50.0, -80.0],
+                diag([16500.0, 16250.0, 16400.0]),
+                2.0,
+                &mut rng,
+            )
+        })
+        .collect();
+    out.push(Case {
+        name: "band1",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    // a cap of 20 degrees
+    let pts = (0..30)
+        .map(|_| {
+            let mut u = rng.unit();
+            u[2] = u[2].abs() * 0.06 + 0.94;
+            let r = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+            let u = u.map(|v| v / r);
+            reading(
+                u,
+                [100.0, 50.0, -80.0],
+                diag([16500.0, 16250.0, 16400.0]),
+                2.0,
+                &mut rng,
+            )
+        })
+        .collect();
+    out.push(Case {
+        name: "cap20",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    // a sensor turned about its z axis only: the points lie on a plane
+    let pts = (0..24)
+        .map(|i| {
+            let u = sph(20.0, 15.0 * i as f64);
+            reading(u, [0.0, 0.0, 0.0], diag([16384.0; 3]), 0.0, &mut rng)
+        })
+        .collect();
+    out.push(Case {
+        name: "plane",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    let pts = (0..12)
+        .map(|i| [1000.0 * i as f64, 500.0 * i as f64 - 3000.0, 250.0])
+        .collect();
+    out.push(Case {
+        name: "line",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    let pts = vec![[120.0, -44.0, 16000.0]; 10];
+    out.push(Case {
+        name: "same",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    // the six faces of a cube less one, then the six faces plus two corners
+    let faces = [
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let d = diag([16420.0, 16350.0, 16300.0]);
+    let pts = faces[..5]
+        .iter()
+        .map(|&u| reading(u, [60.0, -90.0, 30.0], d, 1.0, &mut rng))
+        .collect();
+    out.push(Case {
+        name: "five",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    let mut pts: Vec<[f64; 3]> = faces
+        .iter()
+        .map(|&u| reading(u, [60.0, -90.0, 30.0], d, 1.0, &mut rng))
+        .collect();
     let s = 1.0 / 3f64.sqrt();
     pts.push(reading([s, s, s], [60.0, -90.0, 30.0], d, 1.0, &mut rng));
     pts.push(reading([-s, s, -s], [60.0, -90.0, 30.0], d, 1.0, &mut rng));
-    out.push(Case { name: "eight", points: pts.clone(), radius: 16384.0, descent: seed_opts() });
-    out.push(Case { name: "six_faces", points: pts[..6].to_vec(), radius: 16384.0,
-                    descent: seed_opts() });
+    out.push(Case {
+        name: "eight",
+        points: pts.clone(),
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
+    out.push(Case {
+        name: "six_faces",
+        points: pts[..6].to_vec(),
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
     // gains of 1 : 4 between axes (a badly scaled axis): refused by the bound on their ratio
-    let pts = (0..40).map(|_| {
-        let u = rng.unit();
-        reading(u, [10.0, 20.0, 30.0], diag([16384.0, 16384.0, 4096.0]), 1.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "ratio4", points: pts, radius: 16384.0, descent: seed_opts() });
+    let pts = (0..40)
+        .map(|_| {
+            let u = rng.unit();
+            reading(
+                u,
+                [10.0, 20.0, 30.0],
+                diag([16384.0, 16384.0, 4096.0]),
+                1.0,
+                &mut rng,
+            )
+        })
+        .collect();
+    out.push(Case {
+        name: "ratio4",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
     // noise of a third of the radius: residuals far above the warning
-    let pts = (0..50).map(|_| {
-        let u = rng.unit();
-        reading(u, [0.0, 0.0, 0.0], diag([16384.0; 3]), 5000.0, &mut rng)
-    }).collect();
-    out.push(Case { name: "noisy", points: pts, radius: 16384.0, descent: seed_opts() });
+    let pts = (0..50)
+        .map(|_| {
+            let u = rng.unit();
+            reading(u, [0.0, 0.0, 0.0], diag([16384.0; 3]), 5000.0, &mut rng)
+        })
+        .collect();
+    out.push(Case {
+        name: "noisy",
+        points: pts,
+        radius: 16384.0,
+        descent: seed_opts(),
+    });
     out
 }
 
@@ -236,7 +406,11 @@ fn warning_bits(w: &[String]) -> u32 {
     ];
     let mut bits = 0;
     for s in w {
-        let hit: Vec<u32> = table.iter().filter(|(k, _)| s.contains(k)).map(|&(_, b)| b).collect();
+        let hit: Vec<u32> = table
+            .iter()
+            .filter(|(k, _)| s.contains(k))
+            .map(|&(_, b)| b)
+            .collect();
         assert_eq!(hit.len(), 1, "a warning the C library does not know: {s}");
         bits |= hit[0];
     }
@@ -274,24 +448,45 @@ fn main() {
         };
         let mut fits = String::new();
         for model in [Model::Axis, Model::Full] {
-            let opts = FitOptions { model, radius: Some(c.radius), debias: false, parallel: false,
-                                    tol: REFERENCE_TOL, ..FitOptions::default() };
+            let opts = FitOptions {
+                model,
+                radius: Some(c.radius),
+                debias: false,
+                parallel: false,
+                tol: REFERENCE_TOL,
+                ..FitOptions::default()
+            };
             let (fc, off, m, rms, warn, se) = match fit_ellipsoid(&c.points, &opts) {
                 Ok(f) => {
                     // the largest standard errors of the offsets and of the matrix terms
                     // (-1: none, an exactly determined solve)
                     let big = |v: &[f64]| {
                         let m = v.iter().fold(0.0f64, |a, &b| a.max(b));
-                        if v.iter().all(|x| x.is_finite()) { m } else { -1.0 }
+                        if v.iter().all(|x| x.is_finite()) {
+                            m
+                        } else {
+                            -1.0
+                        }
                     };
                     let se = [big(&f.stderr[..3]), big(&f.stderr[3..])];
-                    (0, f.offset, f.matrix.concat(), f.rms, warning_bits(&f.warnings), se)
+                    (
+                        0,
+                        f.offset,
+                        f.matrix.concat(),
+                        f.rms,
+                        warning_bits(&f.warnings),
+                        se,
+                    )
                 }
                 Err(e) => (code(&e), [0.0; 3], vec![0.0; 9], 0.0, 0, [0.0; 2]),
             };
             fits.push_str(&format!(
                 "     {{{fc}, {{{}}},\n      {{{}}},\n      {}, 0x{warn:02x}, {{{}}}}}",
-                nums(&off), nums(&m), num(rms), nums(&se)));
+                nums(&off),
+                nums(&m),
+                num(rms),
+                nums(&se)
+            ));
             fits.push_str(if model == Model::Axis { ",\n" } else { "" });
         }
         table.push_str(&format!(
