@@ -17,7 +17,7 @@ static void load(void)
     uint8_t b[TC_STORE_BYTES];
     struct tc_record r;
     nv_read(NV_RECORD_ADDR, b, TC_STORE_BYTES);
-    cal_ok = tc_store_unpack(b, &r) == TC_STORE_OK;
+    cal_ok = tc_store_unpack(b, &r) == TC_STORE_OK && r.sensor == TC_STORE_SENSOR_ACCEL;
     if (!cal_ok) applying = 0;
 }
 
@@ -135,6 +135,7 @@ uint8_t cal_write(const uint8_t record[TC_STORE_BYTES])
     struct tc_record r;
     uint8_t st = tc_store_unpack(record, &r);
     if (st != TC_STORE_OK) return st;
+    if (r.sensor != TC_STORE_SENSOR_ACCEL) return TC_STORE_INVALID; /* not this board's sensor */
     return store(record) ? TC_STORE_OK : TC_STORE_CORRUPT;
 }
 
