@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import triaxcal as tc
+from triaxcal.calibration.request import parse_radius
 from triaxcal.cli import main
 from triaxcal.export import crc16_modbus, decode_motioncal, motioncal_packet
-from triaxcal.session.fit import parse_radius, pick_columns, read_table
+from triaxcal.io.tables import pick_columns, read_table
 
 ICM = "icm20948-magneto"
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from triaxcal import sim
+from triaxcal.capture.run import SessionWriteError, SessionWriter, read_session
 from triaxcal.cli import main
-from triaxcal.io.capture import SessionWriteError, SessionWriter, read_session
 from triaxcal.io.serial import Record
 from triaxcal.io.tables import read_table
 

@@ -11,7 +11,7 @@ import pytest
 import triaxcal as tc
 from test_export import CFLAGS, GCC, _build_and_run  # noqa: F401
 from test_export_params import F32, _ada_calibrate, _ada_load, _ap_compass, _ap_load, _qgc_load
-from triaxcal.rotations import mounting
+from triaxcal.conventions.rotations import mounting
 
 ROLL90 = mounting("ROTATION_ROLL_90").matrix
 TILTED = ROLL90 @ tc.sim.rotvec_to_matrix(np.radians([1.5, 0.8, -1.1]))  # 2 deg off ROLL_90

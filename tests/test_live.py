@@ -19,8 +19,10 @@ import numpy as np
 import pytest
 from triaxcal import CalibrationError
 from triaxcal.calibration import Calibration
+from triaxcal.capture.run import SessionWriter, capture, channel_names
 from triaxcal.cli import main
-from triaxcal.io.capture import SessionWriter, capture, channel_names
+from triaxcal.detect.session import session_poses
+from triaxcal.fit.select import fit_robust
 from triaxcal.io.serial import Record, SerialReader
 from triaxcal.live import (
     MOTIONCAL_LIMITS,
@@ -32,8 +34,6 @@ from triaxcal.live import (
 )
 from triaxcal.live.quality import motioncal_regions
 from triaxcal.live.server import LiveServer
-from triaxcal.poses import session_poses
-from triaxcal.select import fit_robust
 from triaxcal.sim import SimDevice, SimIMU, globe_script
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -6,13 +6,13 @@ import argparse
 import sys
 from typing import Any
 
+from ..capture.run import capture, channel_names
+from ..detect.session import POSE_N_COLUMN
 from ..errors import CalibrationError
 from ..io.board_poses import BoardPoseSettings
-from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
-from ..poses import POSE_N_COLUMN
-from ..session.pose_options import add_pose_options, positive_int, settings_from_args
+from ._pose_options import add_pose_options, positive_int, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 

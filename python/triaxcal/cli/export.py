@@ -16,7 +16,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..calibration import Calibration
+from ..calibration.file import Calibration
 from ..errors import CalibrationError
 from ..export import DEVICE_COUNTS_PER_UNIT, EXPORT_FORMATS, export, motioncal_losses
 from ..io.files import check_output, read_bounded
@@ -132,7 +132,7 @@ def _param_options(args: argparse.Namespace) -> dict[str, Any]:
             raise CalibrationError("kalibr needs the IMU rate: pass --rate HZ")
         opts.update(topic=args.topic, rate_hz=args.rate, model=args.kalibr_model)
         if args.noise:
-            from .._schema import parse_json
+            from ..calibration.schema import parse_json
 
             raw = read_bounded(args.noise, limit=1 << 20, what="noise file")
             try:

@@ -12,7 +12,7 @@ import argparse
 import time
 from typing import Any
 
-from ..calibration import Calibration
+from ..calibration.file import Calibration
 from ..errors import CalibrationError
 from ..export import echo_matches, motioncal_losses, motioncal_packet, parse_motioncal_echo
 from .export import _scale

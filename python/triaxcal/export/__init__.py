@@ -31,7 +31,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..calibration import SENSORS, Calibration
+from ..calibration.file import SENSORS, Calibration
+from ..conventions.units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ..errors import CalibrationError
 from ..io.files import os_error_message, write_file
 from ..io.motioncal import (
@@ -42,7 +43,6 @@ from ..io.motioncal import (
     parse_motioncal_echo,
 )
 from ..io.protocol import crc16_modbus
-from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ._cgen import _ident
 from .adafruit import adafruit_calib, adafruit_calib_json
 from .ardupilot import ardupilot_params, ardupilot_parm

@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from .._core import __version__
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
 
 #: Longest ``prefix``: with the longest suffix (``_CALIBRATION_FIXED_H``) every name stays

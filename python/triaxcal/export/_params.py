@@ -18,9 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..conventions.units import DEVICE_COUNTS_PER_UNIT, per_unit, unit_factor
 from ..errors import CalibrationError
-from ..units import DEVICE_COUNTS_PER_UNIT, per_unit, unit_factor
 
 __all__ = ["Physical", "f32", "physical", "pick_sensors"]
 
@@ -209,8 +210,8 @@ def mag_mounting(cal: Calibration, fmt: str, param: str) -> Any:
     is left out."""
     import warnings
 
+    from ..conventions.rotations import mounting, nearest_mounting
     from ..methods.alignment import AlignmentWarning
-    from ..rotations import mounting, nearest_mounting
 
     part = cal.mag
     if part is None or part.alignment is None:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration
+from ..calibration.file import Calibration
 from ..errors import CalibrationError
 from ._params import f32, physical, pick_sensors, require_identity
 

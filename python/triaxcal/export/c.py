@@ -7,8 +7,9 @@ Model: ``out = matrix * (raw - offset)`` (the matrix **multiplies**), with the p
 
 from __future__ import annotations
 
-from ..calibration import Calibration, SensorCalibration
-from ..units import per_unit
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..conventions.units import per_unit
 from ._cgen import (
     _AX,
     _OFFD,

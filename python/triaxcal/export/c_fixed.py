@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
 from ._cgen import (
     _AX,

@@ -29,7 +29,8 @@ import math
 import re
 from typing import Any
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
 
 __all__ = ["JS_FORMS", "js_module", "js_string"]

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from .._core import __version__
-from ..calibration import Calibration
+from ..calibration.file import Calibration
 from ..errors import CalibrationError
 from ._params import physical, require_no_gain_poly
 

@@ -12,11 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..conventions.rotations import rotation_angle_deg
+from ..conventions.units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ..errors import CalibrationError
 from ..io.motioncal import encode_motioncal
-from ..rotations import rotation_angle_deg
-from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
 
 __all__ = ["motioncal_losses", "motioncal_packet"]
 
@@ -96,7 +97,7 @@ def motioncal_packet(
     counts_per_unit : dict, optional
         The driver's scale per sensor, as ``{"accel": (16384, "g"), "mag": (10, "uT")}`` (or a
         bare number in the default unit). Default: the project's device scales
-        (:data:`triaxcal.units.DEVICE_COUNTS_PER_UNIT`):
+        (:data:`triaxcal.conventions.units.DEVICE_COUNTS_PER_UNIT`):
         accel 16384 counts/g, gyro 131 counts/(deg/s), mag 10 counts/uT. Ignored for parts
         whose raw unit is already physical.
     offsets_only : bool

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from ..detect.session import PoseSettings
 from ..errors import CalibrationError
-from ..fit import MODELS
-from ..poses import PoseSettings
+from ..fit.ellipsoid import MODELS
 
 __all__ = ["ACCEL_LIMITS", "SENSOR_COLUMNS", "LiveOptions"]
 
@@ -35,12 +35,12 @@ _MC_HELP = {"gaps": "empty regions of the sphere (MotionCal's 100)",
             "fit_error": "RMS of |calibrated| - radius, in % of the radius"}
 
 def _rects() -> list[list[float]]:
-    from ..coverage import sphere_cells
+    from ..quality.coverage import sphere_cells
 
     return [[round(v, 6) for v in r] for r in sphere_cells().rectangles()]
 
 
-#: The shared coverage cells (``triaxcal.coverage``) as (lon_lo, lon_hi deg, z_lo, z_hi).
+#: The shared coverage cells (``triaxcal.quality.coverage``) as (lon_lo, lon_hi deg, z_lo, z_hi).
 _RECTS = _rects()
 
 _TRAIL_HZ = 25.0
@@ -52,10 +52,10 @@ class LiveOptions:
     """How the live page fits, and where its buttons write.
 
     The fit options are ``triaxcal fit``'s, with its defaults: ``model`` (``"auto"``: by BIC),
-    ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius`` (as
-    ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
+    ``outliers``, ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius``
+    (as ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
     ``detection`` (the pose detection of ``capture`` and ``fit --poses``,
-    :class:`~triaxcal.poses.PoseSettings`; ``None``: the command line's defaults).
+    :class:`~triaxcal.detect.session.PoseSettings`; ``None``: the command line's defaults).
     ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
     the displayed rates. ``mag_buffer`` is the size of the magnetometer's
     buffer of well-spread samples; ``refresh_hz`` how often the background thread refits and
@@ -64,6 +64,7 @@ class LiveOptions:
     """
 
     model: str = "auto"
+    outliers: str = "robust"
     sigma: float = 2.0
     rounds: int = 10
     accel_radius: str = "1g"
@@ -77,11 +78,16 @@ class LiveOptions:
     send_timeout_s: float = 3.0
 
     def __post_init__(self) -> None:
+        from ..calibration.request import parse_radius
         from ..export._cgen import _ident
-        from ..session.fit import parse_radius
 
         if self.model not in (*MODELS, "auto"):
             raise CalibrationError(f"model must be one of {(*MODELS, 'auto')}, got {self.model!r}")
+        from ..calibration.request import OUTLIER_RULES
+
+        if self.outliers not in OUTLIER_RULES:
+            raise CalibrationError(f"outliers must be one of {OUTLIER_RULES}, got "
+                                   f"{self.outliers!r}")
         if not (isinstance(self.sigma, (int, float)) and self.sigma >= 0):
             raise CalibrationError(f"sigma must be >= 0, got {self.sigma!r}")
         for name, lo in (("rounds", 0), ("mag_buffer", 50)):
