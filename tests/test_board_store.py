@@ -345,3 +345,25 @@ def test_board_write_refuses_what_a_board_cannot_apply(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["board", "read", "--port", "x", "--counts-per-g", "0"])
     assert "--counts-per-g" in capsys.readouterr().err
+
+
+def test_board_read_and_write_pass_the_validity_gate(fake, tmp_path, capsys):
+    """Gains 1 : 3.7 between axes (the gate's bound is 3): not written, not stored, unless
+    --force, and then marked as not valid."""
+    bad = BoardRecord(offset=(0, 0, 0), matrix=((1, 0, 0), (0, 1, 0), (0, 0, 0.27)),
+                      radius=16384, model="axis", origin="board", n=60)
+    board = fake(bad.to_bytes())
+    out = tmp_path / "board.json"
+    assert main(["board", "read", "--port", board.port, "-o", str(out)]) == 2  # not written
+    assert "factor of" in capsys.readouterr().err and not out.exists()
+    assert main(["board", "read", "--port", board.port, "-o", str(out), "--force"]) == 0
+    assert Calibration.load(out).accel.valid is False
+    cal = tmp_path / "host.json"
+    host_calibration(matrix=np.diag([1 / 16384, 1 / 16384, 1 / 60000])).save(cal)
+    board = fake()
+    assert main(["board", "write", str(cal), "--port", board.port]) == 2
+    assert "refused to store on the board" in capsys.readouterr().err
+    assert board.stored == b"\xff" * 72
+    assert main(["board", "write", str(cal), "--port", board.port, "--force"]) == 0
+    assert decode_record(board.stored).matrix[2][2] == pytest.approx(16384 / 60000, rel=1e-6)
+

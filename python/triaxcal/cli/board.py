@@ -10,6 +10,9 @@ on the board (a 74-byte write packet, the record with its own CRC) and checks th
 answer: it must hold exactly the record sent. The board applies it to its streams after
 ``A`` (``--apply``).
 
+Both pass the validity gate (:mod:`triaxcal.calibration.gate`): a part it refuses is neither
+written nor stored unless ``--force`` (then marked as not valid, with the reasons).
+
 The record's layout and the frames are in :mod:`triaxcal.io.board_store`.
 """
 
@@ -23,6 +26,8 @@ from typing import Any
 import numpy as np
 
 from ..calibration import Calibration, SensorCalibration
+from ..calibration.gate import check_part, judged, require_valid
+from ..conventions.units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ..errors import CalibrationError
 from ..io.board_store import (
     COMMAND_APPLY,
@@ -32,7 +37,6 @@ from ..io.board_store import (
     RecordReport,
     write_packet,
 )
-from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
 
 _COUNTS_PER_G = DEVICE_COUNTS_PER_UNIT["accel"][0]
 
@@ -94,6 +98,7 @@ def record_to_calibration(rec: BoardRecord, *, counts_per_g: float = _COUNTS_PER
     radius = rec.radius / counts_per_g
     stats: dict[str, Any] = {
         "origin": rec.origin,
+        "converged": not rec.warnings & 0x02,
         "n_poses": rec.n,
         "rms": rec.rms / counts_per_g,
         "rms_pct_of_radius": 100.0 * rec.rms / rec.radius,
@@ -164,6 +169,9 @@ def register(subparsers: Any) -> None:
     w.add_argument("--apply", action="store_true",
                    help="then switch the board's streams to calibrated counts ('A')")
     for q in (r, w):
+        q.add_argument("--force", action="store_true",
+                       help="write (read) or store (write) a calibration the validity gate "
+                            "refuses, marked as not valid (read) with the reasons")
         q.add_argument("--port", required=True,
                        help="serial port (/dev/ttyUSB0, COM3) or a pyserial URL")
         q.add_argument("--baud", type=int, default=115200,
@@ -199,10 +207,14 @@ def run(args: argparse.Namespace) -> int:
               f"({'applied to the streams' if rep.applied else 'streams raw'})")
         _show(rec, cpg)
         if args.out:
-            path = record_to_calibration(rec, counts_per_g=cpg, source=args.port).save(args.out)
+            cal = record_to_calibration(rec, counts_per_g=cpg, source=args.port)
+            part = cal.part("accel")
+            part = judged(part, check_part(part, "accel"), force=args.force)  # the gate
+            path = cal.replace(accel=part).save(args.out)
             print(f"wrote {path}")
         return 0
     cal = Calibration.load(args.calibration)
+    require_valid(cal.part("accel"), "accel", force=args.force, action="store on the board")
     rec = calibration_to_record(cal, counts_per_g=cpg)
     rep = exchange(args.port, write_packet(rec), want=("written", "write refused"),
                    baud=args.baud, timeout=args.timeout)
