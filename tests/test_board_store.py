@@ -16,8 +16,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from triaxcal import Calibration, CalibrationError, SensorCalibration
+from triaxcal.calibration.board import calibration_to_record, record_to_calibration
 from triaxcal.cli import main
-from triaxcal.cli.board import calibration_to_record, record_to_calibration
 from triaxcal.io.board_poses import BoardPoseDecoder, encode_pose_frame
 from triaxcal.io.board_store import (
     BoardQuality,
@@ -178,7 +178,8 @@ def host_calibration(**part) -> Calibration:
 
 def test_record_and_calibration_file():
     cal = host_calibration()
-    rec = calibration_to_record(cal)
+    rec = calibration_to_record(cal,
+                              counts_per_g=16384)
     assert rec.radius == 16384 and rec.origin == "host" and rec.model == "axis" and rec.n == 26
     assert rec.matrix[0][0] == pytest.approx(16384 / 16500, rel=1e-7)
     assert rec.rms == pytest.approx(1e-4 * 16384, rel=1e-6)
@@ -188,14 +189,18 @@ def test_record_and_calibration_file():
     assert back.unit == "g" and back.radius == 1.0 and back.stats["origin"] == "host"
     # m/s^2 converts; other units, raw units and temperature terms cannot go to a board
     ms2 = host_calibration(unit="m/s^2", matrix=np.eye(3) * 9.80665 / 16384, radius=9.80665)
-    assert calibration_to_record(ms2).matrix[1][1] == pytest.approx(1.0, rel=1e-7)
+    assert calibration_to_record(ms2,
+                              counts_per_g=16384).matrix[1][1] == pytest.approx(1.0, rel=1e-7)
     with pytest.raises(CalibrationError, match="cannot convert"):
-        calibration_to_record(host_calibration(unit="uT"))
+        calibration_to_record(host_calibration(unit="uT"),
+                              counts_per_g=16384)
     with pytest.raises(CalibrationError, match="raw unit"):
-        calibration_to_record(host_calibration(raw_unit="g", unit="g"))
+        calibration_to_record(host_calibration(raw_unit="g", unit="g"),
+                              counts_per_g=16384)
     gyro_only = Calibration(gyro=SensorCalibration(offset=[0, 0, 0], matrix=np.eye(3)))
     with pytest.raises(CalibrationError, match="no accel part"):
-        calibration_to_record(gyro_only)
+        calibration_to_record(gyro_only,
+                              counts_per_g=16384)
 
 
 # ------------------------------------------------------------- the CLI, a fake board
@@ -311,10 +316,12 @@ def test_board_write_stores_a_host_calibration(fake, tmp_path, capsys):
     board = fake()
     cal = tmp_path / "host.json"
     host_calibration().save(cal)
-    assert main(["board", "write", str(cal), "--port", board.port, "--apply"]) == 0
+    assert main(["board", "write", "--counts-per-g", "16384",
+                 str(cal), "--port", board.port, "--apply"]) == 0
     assert "calibrated now" in capsys.readouterr().out
     assert board.applied and decode_record(board.stored) == calibration_to_record(
-        Calibration.load(cal))
+        Calibration.load(cal),
+                              counts_per_g=16384)
     assert main(["board", "read", "--port", board.port, "-o", str(tmp_path / "b.json")]) == 0
     back = Calibration.load(tmp_path / "b.json").accel
     np.testing.assert_allclose(back.matrix, Calibration.load(cal).accel.matrix, rtol=1e-7)
@@ -324,7 +331,8 @@ def test_board_write_refused_and_silent_boards(fake, tmp_path, capsys):
     cal = tmp_path / "host.json"
     host_calibration().save(cal)
     board = fake(refuse=True)
-    assert main(["board", "write", str(cal), "--port", board.port]) == 1
+    assert main(["board", "write", "--counts-per-g", "16384",
+                 str(cal), "--port", board.port]) == 1
     assert "refused the record" in capsys.readouterr().err
     board = fake(mute=True)
     assert main(["board", "read", "--port", board.port, "--timeout", "0.5"]) == 1
@@ -340,7 +348,8 @@ def test_board_write_refuses_what_a_board_cannot_apply(tmp_path, capsys):
     terms = TemperatureTerms(temp_ref_c=25.0, temp_range_c=(10.0, 40.0),
                              offset_poly=np.zeros((2, 3)))
     host_calibration(temperature=terms).save(cal)
-    assert main(["board", "write", str(cal), "--port", str(tmp_path / "nope")]) == 1
+    assert main(["board", "write", "--counts-per-g", "16384",
+                 str(cal), "--port", str(tmp_path / "nope")]) == 1
     assert "temperature terms" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["board", "read", "--port", "x", "--counts-per-g", "0"])
@@ -361,9 +370,11 @@ def test_board_read_and_write_pass_the_validity_gate(fake, tmp_path, capsys):
     cal = tmp_path / "host.json"
     host_calibration(matrix=np.diag([1 / 16384, 1 / 16384, 1 / 60000])).save(cal)
     board = fake()
-    assert main(["board", "write", str(cal), "--port", board.port]) == 2
+    assert main(["board", "write", "--counts-per-g", "16384",
+                 str(cal), "--port", board.port]) == 2
     assert "refused to store on the board" in capsys.readouterr().err
     assert board.stored == b"\xff" * 72
-    assert main(["board", "write", str(cal), "--port", board.port, "--force"]) == 0
+    assert main(["board", "write", "--counts-per-g", "16384",
+                 str(cal), "--port", board.port, "--force"]) == 0
     assert decode_record(board.stored).matrix[2][2] == pytest.approx(16384 / 60000, rel=1e-6)
 

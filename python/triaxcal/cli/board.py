@@ -23,11 +23,9 @@ import math
 import time
 from typing import Any
 
-import numpy as np
-
-from ..calibration import Calibration, SensorCalibration
+from ..calibration import Calibration
+from ..calibration.board import calibration_to_record, record_to_calibration
 from ..calibration.gate import check_part, judged, require_valid
-from ..conventions.units import DEVICE_COUNTS_PER_UNIT, unit_factor
 from ..errors import CalibrationError
 from ..io.board_store import (
     COMMAND_APPLY,
@@ -37,8 +35,6 @@ from ..io.board_store import (
     RecordReport,
     write_packet,
 )
-
-_COUNTS_PER_G = DEVICE_COUNTS_PER_UNIT["accel"][0]
 
 
 def _open(port: str, baud: int, timeout: float) -> Any:
@@ -79,69 +75,6 @@ def exchange(port: str, data: bytes, *, want: tuple[str, ...], baud: int = 11520
     )
 
 
-def record_to_calibration(rec: BoardRecord, *, counts_per_g: float = _COUNTS_PER_G,
-                          source: str | None = None) -> Calibration:
-    """A board's record as a calibration file: the accelerometer part in g.
-
-    The board's calibrated counts are at ``counts_per_g``: the part's matrix (g per count)
-    is the record's divided by it, and so are the radius and the RMS.
-
-    Examples
-    --------
-    >>> r = BoardRecord(offset=(180, -240, 350), matrix=((0.985, 0, 0), (0, 1.016, 0),
-    ...                 (0, 0, 0.996)), radius=16384, model="axis", origin="board", n=60)
-    >>> part = record_to_calibration(r).accel
-    >>> part.unit, part.radius, round(float(1 / part.matrix[0, 0]))  # counts per g, x axis
-    ('g', 1.0, 16634)
-    """
-    m = np.asarray(rec.matrix, dtype=float) / counts_per_g
-    radius = rec.radius / counts_per_g
-    stats: dict[str, Any] = {
-        "origin": rec.origin,
-        "converged": not rec.warnings & 0x02,
-        "n_poses": rec.n,
-        "rms": rec.rms / counts_per_g,
-        "rms_pct_of_radius": 100.0 * rec.rms / rec.radius,
-        "spread": rec.spread,
-        "warnings": rec.warning_texts,
-        "board_counts_per_g": counts_per_g,
-    }
-    part = SensorCalibration(offset=np.asarray(rec.offset, dtype=float), matrix=m,
-                             raw_unit="counts", unit="g", radius=radius, model=rec.model,
-                             stats=stats, source=source)
-    return Calibration(accel=part, extra={"board_record": "fitted on the board"
-                                          if rec.origin == "board" else "written by the host"})
-
-
-def calibration_to_record(cal: Calibration, *,
-                          counts_per_g: float = _COUNTS_PER_G) -> BoardRecord:
-    """The accelerometer part of a host calibration as the record a board stores.
-
-    The part must be in raw counts, calibrated in an acceleration unit (g, m/s^2) and have
-    no temperature terms (the board applies none). The board's calibrated counts are at
-    ``counts_per_g``: its matrix is the part's in g per count times that.
-    """
-    part = cal.part("accel")
-    if part.raw_unit != "counts":
-        raise CalibrationError(
-            f"the accelerometer part's raw unit is {part.raw_unit!r}: a board applies its "
-            "calibration to raw counts, so the part must be fitted on counts")
-    if part.temperature is not None:
-        raise CalibrationError(
-            "the accelerometer part has temperature terms, which the board does not apply: "
-            "export it as a C header instead (triaxcal export --format c)")
-    to_g = unit_factor(part.unit, "g")
-    m = np.asarray(part.matrix, dtype=float) * to_g * counts_per_g
-    rms = part.stats.get("rms")
-    rms_counts = float(rms) * to_g * counts_per_g if isinstance(rms, (int, float)) and \
-        math.isfinite(rms) else 0.0
-    n = part.stats.get("n")
-    return BoardRecord(offset=tuple(part.offset), matrix=tuple(tuple(r) for r in m),
-                       radius=counts_per_g, model=part.model if part.model in ("axis", "full")
-                       else None, origin="host", n=n if isinstance(n, int) and 0 <= n < 65536
-                       else 0, rms=rms_counts)
-
-
 def _positive(text: str) -> float:
     try:
         v = float(text)
@@ -161,7 +94,7 @@ def register(subparsers: Any) -> None:
     )
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     r = sub.add_parser("read", help="the board's stored calibration into a calibration file")
-    r.add_argument("-o", "--out", metavar="CAL.json",
+    r.add_argument("-o", "--output", metavar="CAL.json",
                    help="write the calibration file here (otherwise only print it)")
     w = sub.add_parser("write", help="store a host calibration's accelerometer part")
     w.add_argument("calibration", metavar="CAL.json",
@@ -178,13 +111,15 @@ def register(subparsers: Any) -> None:
                        help="baud rate of the board's serial port (default 115200)")
         q.add_argument("--timeout", type=_positive, default=5.0,
                        help="seconds to wait for the board's answer (default 5)")
-        q.add_argument("--counts-per-g", type=_positive, default=_COUNTS_PER_G,
-                       help="the board's nominal scale: its calibrated counts per g (default "
-                            "16384, an MPU-6050 at +-2 g)")
+        q.add_argument("--counts-per-g", type=_positive, default=None,
+                       help="the board's calibrated counts per g (read: default the stored "
+                            "record's radius; write: default the radius of the record the "
+                            "board holds, else required -- 16384 for an MPU-6050 at +-2 g)")
     p.set_defaults(func=run)
 
 
-def _show(rec: BoardRecord, counts_per_g: float) -> None:
+def _show(rec: BoardRecord, counts_per_g: float | None) -> None:
+    counts_per_g = counts_per_g or float(rec.radius)
     gains = [rec.matrix[i][i] for i in range(3)]
     origin = "fitted on the board" if rec.origin == "board" else "written by the host"
     print(f"  model {rec.model or 'other'}, {origin}, {rec.n} poses")
@@ -206,15 +141,24 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.port}: stored calibration "
               f"({'applied to the streams' if rep.applied else 'streams raw'})")
         _show(rec, cpg)
-        if args.out:
+        if args.output:
             cal = record_to_calibration(rec, counts_per_g=cpg, source=args.port)
             part = cal.part("accel")
             part = judged(part, check_part(part, "accel"), force=args.force)  # the gate
-            path = cal.replace(accel=part).save(args.out)
+            path = cal.replace(accel=part).save(args.output)
             print(f"wrote {path}")
         return 0
     cal = Calibration.load(args.calibration)
     require_valid(cal.part("accel"), "accel", force=args.force, action="store on the board")
+    if cpg is None:  # the scale of the record the board holds, if it holds one
+        try:
+            held = exchange(args.port, COMMAND_REPORT, want=("report",), baud=args.baud,
+                            timeout=args.timeout).record()
+            cpg = float(held.radius)
+        except CalibrationError:
+            raise CalibrationError(
+                "the board holds no calibration to take its scale from: give its calibrated "
+                "counts per g with --counts-per-g (16384 for an MPU-6050 at +-2 g)") from None
     rec = calibration_to_record(cal, counts_per_g=cpg)
     rep = exchange(args.port, write_packet(rec), want=("written", "write refused"),
                    baud=args.baud, timeout=args.timeout)
