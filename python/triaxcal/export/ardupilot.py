@@ -64,8 +64,10 @@ from ..conventions.autopilot import (
 from ..errors import CalibrationError
 from ._params import (
     Physical,
+    _factor,
     check_range,
     f32,
+    interference,
     mag_mounting,
     physical,
     pick_sensors,
@@ -140,6 +142,27 @@ def _compass(p: Physical, index: int, scale_mode: Any, offsets_max: float) -> di
         check_range(p.radius, 150.0, 950.0, "the calibrated field strength (mG)",
                     "ArduPilot's calibrator accepts fields of 150..950 mG only "
                     "(CompassCalibrator::fit_acceptable); check the calibration's units")
+    return out
+
+
+def _motor(part: Any, index: int, mounting: Any) -> dict[str, float]:
+    """``COMPASS_MOTn_*`` and ``COMPASS_MOTCT`` of a part with an interference term
+    (``stats["interference"]``: the field per A or per unit of throttle ADDED after the matrix,
+    exactly where ``correct_field`` adds ``COMPASS_MOT * current`` or ``* throttle``); nothing
+    for a part without one."""
+    inter = interference(part)
+    if inter is None:
+        return {}
+    per, vec = inter
+    mg = vec * _factor(part.unit, "mG", "mag", FMT, "calibrated")
+    if mounting is not None:
+        mg = mounting.matrix @ mg
+    names = ardupilot_names("mag", index)
+    out = {f"{names['mot']}{a}": check_range(
+        float(mg[i]), -1000.0, 1000.0, f"{names['mot']}{a}",
+        "ArduPilot's range of COMPASS_MOT is -1000..1000 mG per A (or per full throttle)")
+        for i, a in enumerate("XYZ")}
+    out[names["motct"]] = float(AP_MOTCT_CURRENT if per == "A" else AP_MOTCT_THROTTLE)
     return out
 
 
@@ -288,7 +311,7 @@ def _ardupilot(cal: Calibration, *, imu: int = 0, compass: int = 0,
         out.update(_compass(p, compass, compass_scale, float(offsets_max)))
         if mnt is not None:
             out[mag_names["orient"]] = float(mnt.number)
-        out.update(_motor(cal.part("mag"), compass, mnt is not None))
+        out.update(_motor(cal.part("mag"), compass, mnt))
     return out, prep
 
 
