@@ -110,6 +110,12 @@ def _series(rows: list[tuple[int, Any]], t0: int, name: str, unit: str) -> Serie
     return Series(t=(t[order] - t0) * 1e-6, values=v[order], name=name, unit=unit)
 
 
+def _deg(v: Any) -> float:
+    """Degrees from a DataFlash latitude/longitude: pymavlink scales ``L`` fields to degrees;
+    plain int32 fields hold degrees * 1e7."""
+    return float(v) * 1e-7 if isinstance(v, int) and abs(v) > 360 else float(v)
+
+
 def _dataflash(p: Path, t0: int | None) -> FlightData:
     dfreader = require("pymavlink.DFReader", "ArduPilot DataFlash logs", package="pymavlink")
     if not p.is_file():
@@ -153,9 +159,9 @@ def _dataflash(p: Path, t0: int | None) -> FlightData:
                     thr.append((tus, float(m.ThrOut) / 1000.0))
             elif kind == "GPS" and gps is None:
                 if int(getattr(m, "Status", 0)) >= 3 and (m.Lat != 0 or m.Lng != 0):
-                    gps = (float(m.Lat), float(m.Lng), float(getattr(m, "Alt", 0.0)))
+                    gps = (_deg(m.Lat), _deg(m.Lng), float(getattr(m, "Alt", 0.0)))
             elif kind == "ORGN" and origin is None and (m.Lat != 0 or m.Lng != 0):
-                origin = (float(m.Lat), float(m.Lng), float(getattr(m, "Alt", 0.0)))
+                origin = (_deg(m.Lat), _deg(m.Lng), float(getattr(m, "Alt", 0.0)))
     except CalibrationError:
         raise
     except Exception as exc:  # pymavlink raises assorted errors on damaged files
