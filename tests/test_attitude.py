@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import triaxcal as tc
 from triaxcal.calibration.flight import fit_flight
 from triaxcal.calibration.gate import check_part

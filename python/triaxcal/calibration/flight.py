@@ -180,7 +180,7 @@ def _fit(src: FlightSource, sel: np.ndarray, b: np.ndarray | None, heading: str,
 
 
 def _metrics(src: FlightSource, fit: AttitudeFit, sel: np.ndarray,
-             declination: float | None) -> dict[str, float]:
+             declination: float | None) -> dict[str, Any]:
     x = None if src.x is None else src.x[sel]
     after = fit.apply(src.raw[sel], x)
     before = src.logged[sel] @ src.to_body.T

@@ -74,7 +74,7 @@ class FlightData:
     def dcm(self, t: Any) -> np.ndarray:
         """Body-to-NED rotation matrices (N, 3, 3) at times ``t`` (nearest attitude sample:
         angles do not interpolate linearly across the +-180 deg wrap)."""
-        from ...methods.attitude import euler_to_dcm, quat_to_dcm
+        from ...conventions.rotations import euler_to_dcm, quat_to_dcm
 
         if self.attitude is None:
             raise CalibrationError("this log has no attitude")
