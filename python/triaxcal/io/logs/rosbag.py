@@ -12,6 +12,11 @@ calibrated.
 
 A ROS 2 bag is a folder with ``metadata.yaml``; pass the folder or a ``.db3``/``.mcap`` file
 in it (a lone ``.mcap`` file also works).
+
+Before ``rosbags`` sees a bag, :func:`~triaxcal.io.logs.bagcheck.check_bag` checks its magic
+bytes, that every record's lengths lie inside the file and that every compressed chunk unpacks
+to the size it declares (at most 256 MiB): ``rosbags`` would read a file of zeros named
+``.bag`` whole into memory, and unpack a chunk without bound.
 """
 
 from __future__ import annotations
@@ -22,8 +27,10 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
+from ..files import check_regular
 from ..recording import LogRecording, Stream
 from . import require
+from .bagcheck import check_bag
 
 __all__ = ["read_rosbag"]
 
@@ -49,8 +56,7 @@ def _bag_path(p: Path) -> tuple[Path, str]:
         if not (p / "metadata.yaml").is_file():
             raise CalibrationError(f"{p} is a folder without metadata.yaml: not a ROS 2 bag")
         return p, "ros2-bag"
-    if not p.is_file():
-        raise CalibrationError(f"log file {p} not found")
+    check_regular(p, what="log file")
     suffix = p.suffix.lower()
     if suffix == ".bag":
         return p, "ros1-bag"
@@ -100,6 +106,7 @@ def read_rosbag(path: str | Path, *, instance: int | None = None, topic: Any = N
         )
     p = Path(path)
     bag, fmt = _bag_path(p)
+    check_bag(bag, fmt)  # magic, lengths and chunk sizes, before rosbags sees it
     chosen = _topics(topic)
     try:
         reader = highlevel.AnyReader([bag])
