@@ -23,7 +23,21 @@ from typing import Any, BinaryIO
 from ..errors import CalibrationError
 
 __all__ = ["check_output", "check_regular", "open_regular", "os_error_message", "read_bounded",
-           "write_file"]
+           "said", "write_file"]
+
+
+def said(text: Any, limit: int = 200) -> str:
+    r"""Text that came from a file or a third-party reader, fit for a message: control and
+    other unprintable characters (ESC, BEL, CR...) become ``?`` and it is cut at ``limit``
+    characters, so nothing in a damaged file can drive the terminal.
+
+    >>> said("bad\x1b[31m record\r\n")
+    'bad?[31m record??'
+    """
+    text = str(text)
+    cut = len(text) > limit
+    text = "".join(ch if ch.isprintable() else "?" for ch in text[:limit])
+    return text + ("..." if cut else "")
 
 
 def os_error_message(exc: OSError, path: Any, action: str = "write") -> str:

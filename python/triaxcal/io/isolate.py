@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError
+from .files import said
 
 __all__ = ["MEMORY_BASE", "MEMORY_PER_BYTE", "TIMEOUT_S", "TIMEOUT_S_PER_MB", "run_native"]
 
@@ -124,16 +125,16 @@ def run_native(reader: str, path: Any, *, what: str, size: int | None = None,
             raise CalibrationError(f"{damaged}: its reader crashed on it ({name})")
         meta_path = out / "meta.json"
         if proc.returncode != 0 or not meta_path.is_file():
-            said = _tail(log)
+            printed = _tail(log)
             raise CalibrationError(
                 f"{damaged}: its reader stopped (exit status {proc.returncode})"
-                + (f": {said[-300:]!r}" if said else "")
+                + (f": {said(printed, 300)}" if printed else "")
             )
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
         if "error" in meta:
-            raise CalibrationError(f"{damaged}: {str(meta['error'])[:300]}")
+            raise CalibrationError(f"{damaged}: {said(meta['error'], 300)}")
         printed = _tail(log)
         if printed:
-            meta.setdefault("warnings", []).append(printed[-300:])
+            meta.setdefault("warnings", []).append(said(printed, 300))
         arrays = {q.stem: np.load(q, allow_pickle=False) for q in out.glob("*.npy")}
     return meta, arrays

@@ -50,7 +50,7 @@ import numpy as np
 
 from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
-from .files import check_regular, open_regular, os_error_message
+from .files import check_regular, open_regular, os_error_message, said
 from .isolate import run_native
 
 __all__ = ["WearableRecording", "geneactiv_header", "read_geneactiv_pages", "read_wearable"]
@@ -159,9 +159,42 @@ def read_wearable(path: Any) -> WearableRecording:
 
 @contextlib.contextmanager
 def _quiet() -> Any:
-    with warnings.catch_warnings(record=True) as caught:
+    """Collect the reader's warnings, and what it prints (pygt3x prints a line per damaged
+    event to standard output, which is the command line's output), as a list of text."""
+    printed = _Sink()
+    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stdout(printed):
         warnings.simplefilter("always")
-        yield caught
+        out: list[str] = []
+        yield out
+    out += [str(w.message) for w in caught] + printed.summary()
+
+
+class _Sink:
+    """A bounded stand-in for standard output: keeps the first lines and counts the rest."""
+
+    def __init__(self, keep: int = 5) -> None:
+        self.lines: list[str] = []
+        self.more = 0
+        self.keep = keep
+        self.part = ""
+
+    def write(self, text: str) -> int:
+        self.part = (self.part + text)[-4096:]
+        *done, self.part = self.part.split("\n")
+        for line in done:
+            if not line.strip():
+                continue
+            if len(self.lines) < self.keep:
+                self.lines.append(line.strip()[:200])
+            else:
+                self.more += 1
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def summary(self) -> list[str]:
+        return self.lines + ([f"... and {self.more} more lines like these"] if self.more else [])
 
 
 def _u16(b: bytes, at: int) -> int:
@@ -497,7 +530,7 @@ def check_gt3x(path: Any, size: int | None = None) -> None:
             with zipfile.ZipFile(f) as z:
                 entries = z.infolist()
         except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, EOFError) as exc:
-            raise CalibrationError(f"{bad}: not a zip archive ({exc})") from None
+            raise CalibrationError(f"{bad}: not a zip archive ({said(exc)})") from None
         except OSError as exc:
             raise CalibrationError(os_error_message(exc, p, "read")) from None
     if len(entries) > MAX_GT3X_ENTRIES:
@@ -506,13 +539,14 @@ def check_gt3x(path: Any, size: int | None = None) -> None:
     if "info.txt" not in names or not ({"log.bin"} <= names or {"log.txt", "activity.bin"}
                                        <= names):
         raise CalibrationError(f"{bad}: its zip lacks info.txt and log.bin "
-                               f"(it holds {', '.join(sorted(names)[:8]) or 'nothing'})")
+                               f"(it holds {said(', '.join(sorted(names)[:8])) or 'nothing'})")
     for e in entries:
         if e.file_size > MAX_GT3X_ENTRY_BYTES or e.file_size > MAX_GT3X_RATIO * max(
                 e.compress_size, 1 << 16):
             raise CalibrationError(
-                f"{bad}: its entry {e.filename[:60]!r} would unpack to {e.file_size / 1e6:.0f} "
-                f"MB from {e.compress_size / 1e6:.1f} MB (a damaged or hostile zip)"
+                f"{bad}: its entry {said(e.filename, 60)!r} would unpack to "
+                f"{e.file_size / 1e6:.0f} MB from {e.compress_size / 1e6:.1f} MB (a damaged or "
+                "hostile zip)"
             )
 
 
@@ -525,13 +559,13 @@ def _read_gt3x(p: Path, size: int) -> WearableRecording:
                 info = f.info
                 df = f.to_pandas()
         except Exception as exc:  # noqa: BLE001 - the reader raises many kinds
-            raise CalibrationError(f"{p.name} is not a readable ActiGraph .gt3x file: {exc}"
-                                   ) from None
+            raise CalibrationError(f"{p.name} is not a readable ActiGraph .gt3x file: "
+                                   f"{type(exc).__name__}: {said(exc)}") from None
     acc = df[["X", "Y", "Z"]].to_numpy(dtype=np.float64)
     meta = {"idle_sleep_rows": int(df["IdleSleepMode"].sum()) if "IdleSleepMode" in df else 0,
             "range_g": (info.acceleration_min, info.acceleration_max),
             "scale": info.acceleration_scale, "firmware": info.firmware,
-            "warnings": [str(w.message) for w in caught]}
+            "warnings": caught}
     return WearableRecording(
         path=p, acc_g=acc, rate_hz=float(info.sample_rate),
         time_s=np.asarray(df.index, dtype=np.float64), temp_c=None,
