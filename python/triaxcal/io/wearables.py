@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
+import logging
 import re
 import struct
 import sys
@@ -158,15 +159,26 @@ def read_wearable(path: Any) -> WearableRecording:
 
 
 @contextlib.contextmanager
-def _quiet() -> Any:
-    """Collect the reader's warnings, and what it prints (pygt3x prints a line per damaged
-    event to standard output, which is the command line's output), as a list of text."""
-    printed = _Sink()
-    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stdout(printed):
-        warnings.simplefilter("always")
-        out: list[str] = []
-        yield out
-    out += [str(w.message) for w in caught] + printed.summary()
+def _quiet(logger: str = "pygt3x") -> Any:
+    """Collect the reader's warnings, what it logs (pygt3x logs a warning per damaged event,
+    which Python's last-resort handler would print on the terminal) and what it prints, as a
+    bounded list of text."""
+    sink = _Sink()
+    handler = logging.StreamHandler(sink)
+    handler.setLevel(logging.WARNING)
+    log = logging.getLogger(logger)
+    propagate = log.propagate
+    log.addHandler(handler)
+    log.propagate = False
+    out: list[str] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stdout(sink):
+            warnings.simplefilter("always")
+            yield out
+    finally:
+        log.removeHandler(handler)
+        log.propagate = propagate
+    out += [str(w.message) for w in caught] + sink.summary()
 
 
 class _Sink:
@@ -391,38 +403,60 @@ def read_geneactiv_pages(path: Any) -> tuple[np.ndarray, np.ndarray, float, int]
     read line by line with bounded lines; a page cut short or malformed (a truncated file, a
     temperature or rate that is not a number in range, a rate that differs from the first
     page's) ends the reading, and everything after it is left out."""
-    p = Path(path)
+    counts, temps, rate, pages, _ = _decode_pages(Path(path))
+    return counts, temps, rate, pages
+
+
+def _decode_pages(p: Path) -> tuple[np.ndarray, np.ndarray, float, int, str | None]:
+    """:func:`read_geneactiv_pages`, and why the reading stopped before the end (or None)."""
     hexes = bytearray()
     temps: list[float] = []
     rate = 0.0
+    stop: str | None = None
     with open_regular(p, what="wearable file") as f:
         lines = _lines(f, 2 * 12 * PAGE_SAMPLES)
         for line in lines:
             if line == "Recorded Data":
                 break
         while True:
+            k = len(temps)
             block = [ln for _, ln in zip(range(9), lines)]
             if len(block) < 9:
+                stop = f"the file ends inside page {k} (cut short)"
                 break
             meta = {k.strip(): v.strip() for k, _, v in (ln.partition(":") for ln in block[:8])}
             t = _number(meta.get("Temperature", ""), -100.0, 200.0)
             r = _number(meta.get("Measurement Frequency", ""), 1e-3, 1e5)
             data = block[8].encode("latin-1")
-            if (t is None or r is None or (rate and r != rate) or len(data) != 12 * PAGE_SAMPLES
-                    or (_HEX[np.frombuffer(data, np.uint8)] == 255).any()):
-                break  # cut off, or not a page
+            if t is None:
+                stop = (f"page {k}: Temperature {said(meta.get('Temperature'), 40)!r} is not a "
+                        "temperature in deg C")
+            elif r is None:
+                stop = (f"page {k}: Measurement Frequency "
+                        f"{said(meta.get('Measurement Frequency'), 40)!r} is not a rate in Hz")
+            elif rate and r != rate:
+                stop = f"page {k}: Measurement Frequency {r:g} differs from page 0's {rate:g}"
+            elif (len(data) != 12 * PAGE_SAMPLES
+                  or (_HEX[np.frombuffer(data, np.uint8)] == 255).any()):
+                stop = f"page {k}: its data line is not {12 * PAGE_SAMPLES} hex digits"
+            if stop is not None:
+                break
+            assert r is not None and t is not None
             rate = r
             hexes += data
             temps.append(t)
-            if next(lines, None) != "Recorded Data":
+            following = next(lines, None)
+            if following != "Recorded Data":
+                if following is not None:
+                    stop = f"after page {k}: a line that is not 'Recorded Data'"
                 break
     if not temps:
-        raise CalibrationError(f"{p.name}: no complete data page")
+        raise CalibrationError(f"{p.name}: no complete data page ({stop})")
     nib = _HEX[np.frombuffer(bytes(hexes), np.uint8)].reshape(-1, 12).astype(np.int64)
     xyz = np.stack([nib[:, 3 * a] * 256 + nib[:, 3 * a + 1] * 16 + nib[:, 3 * a + 2]
                     for a in range(3)], axis=1)
     xyz = np.where(xyz >= 2048, xyz - 4096, xyz)
-    return xyz, np.repeat(np.asarray(temps), PAGE_SAMPLES), rate, len(temps)
+    return xyz, np.repeat(np.asarray(temps), PAGE_SAMPLES), rate, len(temps), stop
 
 
 # skdh's GENEActiv reader (read_geneactiv.c) reads the header and each page with fgets into
@@ -508,13 +542,13 @@ def _read_geneactiv(p: Path, size: int) -> WearableRecording:
                 factory=factory, meta={"header": header, "warnings": meta.get("warnings", [])})
         except CalibrationError as exc:  # decoded page by page below
             why = str(exc)
-    counts, temp, rate, pages = read_geneactiv_pages(p)
+    counts, temp, rate, pages, stop = _decode_pages(p)
     acc = factory.apply(counts.astype(np.float64))
     return WearableRecording(
         path=p, acc_g=acc, rate_hz=rate, time_s=None, temp_c=temp, device=device,
         serial=serial, reader="triaxcal GENEActiv page decoder", factory=factory,
-        raw_counts=counts, meta={"header": header, "pages": pages,
-                                 "skdh_refused": why})
+        raw_counts=counts, meta={"header": header, "pages": pages, "skdh_refused": why,
+                                 "pages_left_out": stop})
 
 
 def check_gt3x(path: Any, size: int | None = None) -> None:
