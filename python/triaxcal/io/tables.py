@@ -16,6 +16,10 @@ What it does with lines that are not a row of the table:
   its line number, or, with ``skip_bad_lines=True`` (``--skip-bad-lines``), is skipped and
   counted.
 
+:func:`iter_table` reads the same table in blocks of rows, in memory bounded by one block
+(recordings of any length); :func:`iter_csv` reads the records of a CSV file of text (an id
+column) with the same bounds. All three read only a regular file
+(:func:`triaxcal.io.files.open_regular`: a pipe, a device or a socket is refused at once).
 :func:`pick_columns` chooses the three columns of one sensor by name or index.
 """
 
