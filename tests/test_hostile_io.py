@@ -15,6 +15,7 @@ files built here.
 from __future__ import annotations
 
 import bz2
+import functools
 import os
 import random
 import socket
@@ -1017,3 +1018,91 @@ def test_dataflash_known_failures(realdata, tmp_path, edit):
         tc.read_log(p)
     except tc.CalibrationError:
         pass
+
+
+# --------------------------------------------------------------------------------------------
+# the structure checks alone, on many random mutations (in this process: they are Python)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(edits=st.lists(st.tuples(st.integers(0, 7 * 512 - 1), st.integers(0, 255)), min_size=1,
+                      max_size=6),
+       fix=st.booleans(), keep=st.integers(2, 7))
+def test_check_cwa_never_lets_an_unsafe_block_through(realdata, tmp_path, edits, fix, keep):
+    """Bytes of the header and the first blocks changed (checksums made good again or not):
+    check_cwa refuses, or every block skdh would take is numbered inside the file."""
+    from triaxcal.io.wearables import check_cwa
+
+    b = bytearray((realdata / WEAR / "ax3_testfile.cwa").read_bytes()[:512 * keep])
+    for at, value in edits:
+        if at < len(b):
+            b[at] = value
+    if fix:
+        for k in range(2, keep):
+            cwa_fix_checksum(b, k)
+    p = tmp_path / "m.cwa"
+    p.write_bytes(bytes(b))
+    try:
+        info = check_cwa(p)
+    except tc.CalibrationError as exc:
+        assert "Axivity" in str(exc)
+        return
+    blocks = np.frombuffer(bytes(b[1024:]), np.uint8).reshape(-1, 512)
+    w = blocks.view("<u2")
+    good = (w[:, 0] == 0x5841) & (w[:, 1] == 508) & (w.astype(np.int64).sum(1) % 65536 == 0)
+    seq = blocks[:, 10:14].copy().view("<i4").ravel()
+    assert np.all((seq[good] >= 0) & (seq[good] < info["blocks"]))
+    assert b[:2] == b"MD" and info["axes"] == 3
+
+
+def ros1_uncompressed(bag: bytes) -> bytes:
+    """``bag`` with its chunks stored unpacked (compression "none")."""
+    recs = []
+    for pos, fields, data in ros1_records(bag):
+        f = dict(fields)
+        if f.get(b"op") == b"\x05" and f[b"compression"] == b"bz2":
+            data = bz2.decompress(data)
+            fields = [(k, b"none" if k == b"compression" else v) for k, v in fields]
+        recs.append((pos, fields, data))
+    return ros1_build(recs)
+
+
+@functools.lru_cache(maxsize=1)
+def _uncompressed_razor(realdata: Path) -> bytes:
+    return ros1_uncompressed((realdata / ROS / "sparkfun_razor.bag").read_bytes())
+
+
+@settings(max_examples=80, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(edits=st.lists(st.tuples(st.integers(0, 1_300_000), st.integers(0, 255)), min_size=1,
+                      max_size=4),
+       near_start=st.booleans(), cut=st.one_of(st.none(), st.integers(0, 1_300_000)))
+def test_check_bag_refuses_or_passes_never_raises_otherwise(realdata, tmp_path, edits,
+                                                             near_start, cut):
+    """Bytes changed (in the headers near the start, or anywhere) and cuts anywhere, in a bag
+    with unpacked chunks (so that the walk itself is what is tested, fast): check_bag refuses
+    with a CalibrationError naming the file, or passes (what rosbags then does with such
+    files is the bag corpus's business)."""
+    pytest.importorskip("rosbags")
+    from triaxcal.io.logs.bagcheck import check_bag
+
+    b = bytearray(_uncompressed_razor(realdata))
+    for at, value in edits:
+        b[at % (300 if near_start else len(b))] = value
+    p = tmp_path / "m.bag"
+    p.write_bytes(bytes(b[:cut]))
+    try:
+        check_bag(p, "ros1-bag")
+    except tc.CalibrationError as exc:
+        assert str(p) in str(exc)
+
+
+def test_the_uncompressed_bag_reads_as_the_real_one(realdata, tmp_path):
+    pytest.importorskip("rosbags")
+    real = tc.read_log(realdata / ROS / "sparkfun_razor.bag")
+    p = tmp_path / "none.bag"
+    p.write_bytes(ros1_uncompressed((realdata / ROS / "sparkfun_razor.bag").read_bytes()))
+    rec = tc.read_log(p)
+    assert np.array_equal(rec.accel.data, real.accel.data)
+    assert np.array_equal(rec.mag.data, real.mag.data)

@@ -21,7 +21,6 @@ from __future__ import annotations
 import importlib.machinery
 import importlib.util
 import json
-import resource
 import sys
 import warnings
 from pathlib import Path
@@ -87,10 +86,14 @@ READERS = {"skdh-cwa": _cwa, "skdh-bin": _bin}
 
 def main(argv: list[str]) -> int:
     reader, path, outdir, memory = argv[0], argv[1], Path(argv[2]), int(argv[3])
-    if memory > 0 and hasattr(resource, "RLIMIT_AS"):
-        soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    try:
+        import resource
+
+        _, hard = resource.getrlimit(resource.RLIMIT_AS)
         cap = memory if hard == resource.RLIM_INFINITY else min(memory, hard)
         resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    except (ImportError, AttributeError, ValueError, OSError):
+        pass  # no address-space limit on this system (the time limit still holds)
     meta: dict[str, Any]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
