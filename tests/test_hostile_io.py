@@ -1106,3 +1106,36 @@ def test_the_uncompressed_bag_reads_as_the_real_one(realdata, tmp_path):
     rec = tc.read_log(p)
     assert np.array_equal(rec.accel.data, real.accel.data)
     assert np.array_equal(rec.mag.data, real.mag.data)
+
+
+def test_control_characters_from_a_bag_do_not_reach_the_terminal(realdata, tmp_path):
+    """A topic name is text from the file: ESC, BEL and CR in it are shown as '?' (before:
+    printed raw, so a crafted bag could drive the terminal)."""
+    pytest.importorskip("rosbags")
+    recs = ros1_records((realdata / ROS / "sparkfun_razor.bag").read_bytes())
+    evil = b"/imu\x1b]0;owned\x07\x1b[2J\r"
+
+    def fields_of(h):
+        out, i = [], 0
+        while i < len(h):
+            n = struct.unpack_from("<I", h, i)[0]
+            k, _, v = h[i + 4:i + 4 + n].partition(b"=")
+            out.append((k, v))
+            i += 4 + n
+        return out
+
+    def encode(fields):
+        return b"".join(struct.pack("<I", len(k) + 1 + len(v)) + k + b"=" + v for k, v in fields)
+
+    out = []
+    for pos, fields, data in recs:
+        if dict(fields).get(b"op") == b"\x07":  # a connection: its header and its data
+            fields = [(k, evil if k == b"topic" else v) for k, v in fields]
+            data = encode([(k, evil if k == b"topic" else v) for k, v in fields_of(data)])
+        out.append((pos, fields, data))
+    p = tmp_path / "evil.bag"
+    p.write_bytes(ros1_build(out))
+    with pytest.raises(tc.CalibrationError) as exc:
+        tc.read_log(p, topic="/nothing")
+    msg = str(exc.value)
+    assert "owned" in msg and not any(c in msg for c in "\x1b\x07\r"), repr(msg)
