@@ -72,6 +72,10 @@ def run_corpus(kind: str, cases: dict[str, Path], *, timeout: float = 120.0,
         started = [ln for ln in out.splitlines() if ln.startswith("START")]
         last = names[int(started[-1].split()[1])] if started else "?"
         pytest.fail(f"{kind} corpus: hang (killed after {timeout:.0f} s) at case {last!r}")
+    finally:
+        if proc.poll() is None:  # the test itself timed out: leave no process behind
+            proc.kill()
+            proc.wait()
     outcome: dict[str, str] = {}
     current = None
     for line in out.splitlines():
