@@ -169,3 +169,19 @@ def test_library_call_in_process():
     assert res[0].passed and res[0].part is not None and res[0].outputs == ()
     with pytest.raises(CalibrationError):
         Limits(offset_max=float("nan"))
+
+
+def test_grouped_table_keeps_ids_apart_and_reads_numbers_as_the_table_reader(tmp_path):
+    """Ids that differ only by spaces are other boards; a value read_table refuses (nan,
+    1_000) is refused here too; a --limits path that is not a regular file is refused."""
+    from triaxcal.fleet.batch import load_limits, read_grouped_table
+
+    p = tmp_path / "g.csv"
+    p.write_text("id,x,y,z\nB1,1,2,3\nB1 ,4,5,6\n")
+    assert [i for i, _ in read_grouped_table(p, "id")] == ["B1", "B1 "]
+    for bad in ("nan", "1_000", "inf"):
+        p.write_text(f"id,x,y,z\nB1,1,2,{bad}\n")
+        with pytest.raises(CalibrationError, match="line 2"):
+            read_grouped_table(p, "id")
+    with pytest.raises(CalibrationError, match="not a regular file|device"):
+        load_limits("/dev/zero")

@@ -37,6 +37,7 @@ from .gate import check_part, judged
 from .part import SensorCalibration, TemperatureTerms
 
 __all__ = [
+    "part_from_factory",
     "part_from_autocal",
     "part_from_yaw",
     "fold_asa",
@@ -380,3 +381,12 @@ def part_from_autocal(cal: Any, *, source: str | None = None, force: bool = Fals
                              unit="g", radius=1.0, model="autocal-vanhees",
                              temperature=temp, stats=stats, source=source)
     return gated(part, "accel", force=force)
+
+
+def part_from_factory(factory: Any) -> SensorCalibration:
+    """A maker's calibration from a file header (:class:`triaxcal.io.wearables.
+    FactoryCalibration`) as a part: counts -> g, ``matrix = diag(diag)``. It is the maker's
+    own calibration, recorded as it is (model ``"factory"``), not judged by the gate."""
+    return SensorCalibration(offset=factory.offset, matrix=np.diag(factory.diag),
+                             raw_unit="counts", unit="g", radius=1.0, model="factory",
+                             stats={"calibration_date": factory.date}, source=factory.source)

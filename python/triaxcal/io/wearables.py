@@ -28,9 +28,9 @@ rate, the time stamps and the temperature when the device records one.
 
 GENEActiv factory calibration (header ``Calibration Data``): ``g = (raw * 100 - offset) /
 gain`` per axis, raw in counts. In triaxcal's convention that is ``g = (raw - offset / 100) *
-(100 / gain)``: :attr:`WearableRecording.factory` is a :class:`~triaxcal.SensorCalibration`
-with ``offset = offset / 100`` counts and ``matrix = diag(100 / gain)`` g per count (the matrix
-**multiplies**).
+(100 / gain)``: :attr:`WearableRecording.factory` is a :class:`FactoryCalibration` with
+``offset = offset / 100`` counts and ``diag = 100 / gain`` g per count (which **multiplies**);
+:func:`triaxcal.calibration.parts.part_from_factory` makes it a calibration file's part.
 """
 
 from __future__ import annotations
@@ -49,12 +49,13 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
 from .files import check_regular, open_regular, os_error_message, said
 from .isolate import run_native
 
-__all__ = ["WearableRecording", "geneactiv_header", "read_geneactiv_pages", "read_wearable"]
+__all__ = [
+    "FactoryCalibration", "WearableRecording", "geneactiv_header", "read_geneactiv_pages",
+    "read_wearable"]
 
 FORMATS = {".cwa": "Axivity", ".bin": "GENEActiv", ".gt3x": "ActiGraph"}
 #: Samples per GENEActiv data page.
@@ -69,6 +70,31 @@ MAX_GT3X_ENTRY_BYTES = 1 << 32
 MAX_GT3X_RATIO = 200
 # Longest line of a GENEActiv header read (a real one is under 120 bytes).
 _LINE = 4096
+
+
+@dataclass(frozen=True)
+class FactoryCalibration:
+    """A maker's calibration read from a file header (GENEActiv's ``Calibration Data``), in
+    triaxcal's convention ``g = (counts - offset) * diag`` per axis.
+
+    Attributes
+    ----------
+    offset : ndarray (3,)
+        Counts.
+    diag : ndarray (3,)
+        g per count; it **multiplies**.
+    date, source : str
+        The calibration date the header gives, and the file.
+    """
+
+    offset: np.ndarray
+    diag: np.ndarray
+    date: str = ""
+    source: str = ""
+
+    def apply(self, counts: Any) -> np.ndarray:
+        """Counts (N, 3) to g."""
+        return (np.asarray(counts, dtype=np.float64) - self.offset) * self.diag
 
 
 @dataclass(frozen=True)
@@ -90,7 +116,7 @@ class WearableRecording:
     device: str
     serial: str | None
     reader: str
-    factory: SensorCalibration | None = None
+    factory: FactoryCalibration | None = None
     raw_counts: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
@@ -361,7 +387,7 @@ def geneactiv_header(path: Any) -> dict[str, str]:
     return out
 
 
-def _factory(header: dict[str, str], source: str) -> SensorCalibration:
+def _factory(header: dict[str, str], source: str) -> FactoryCalibration:
     try:
         gain = np.array([float(header[f"{a} gain"]) for a in "xyz"])
         off = np.array([float(header[f"{a} offset"]) for a in "xyz"])
@@ -372,10 +398,8 @@ def _factory(header: dict[str, str], source: str) -> SensorCalibration:
         ok &= (gain > 0) & np.isfinite(100.0 / gain) & (100.0 / gain > 0)
     if not ok.all():
         raise CalibrationError(f"implausible GENEActiv calibration: gains {gain}, offsets {off}")
-    return SensorCalibration(offset=off / 100.0, matrix=np.diag(100.0 / gain), raw_unit="counts",
-                             unit="g", radius=1.0, model="factory",
-                             stats={"calibration_date": header.get("Calibration Date", "")},
-                             source=source)
+    return FactoryCalibration(offset=off / 100.0, diag=100.0 / gain,
+                              date=header.get("Calibration Date", ""), source=source)
 
 
 # Hex digit values (255: not a hex digit), for decoding a page's 3600 characters at once.
