@@ -865,3 +865,33 @@ def test_old_spellings_warn_and_do_what_the_new_ones_do(still_session, tmp_path,
     assert main(["noise", str(still_session), "--sensor", "both", "--counts-per-unit",
                  "131"]) == 1
     assert "say whose counts" in capsys.readouterr().err
+
+
+_T = "t,gx,gy,gz\n"
+
+
+@pytest.mark.parametrize("content, message", [
+    (_T + "".join(f"{i / 100},1,2,3\n" for i in range(5)), "too short for noise figures"),
+    (_T + "".join(f"{i / 100},{'nan' if i == 700 else 1},2,3\n" for i in range(3000)),
+     "is NaN or inf"),
+    (_T + "".join(f"{i / 100},{(-1) ** i * 1e300},2e300,3\n" for i in range(3000)),
+     "overflows a double"),
+    (_T + "".join(f"{'nan' if i == 9 else i / 100},1,2,3\n" for i in range(3000)),
+     "t column is not a number at data row 10"),
+    (_T + "".join(f"{i / 100},5,5,5\n" for i in range(3000)), "zero Allan deviation"),
+    (_T + "".join(f"{1e308 * (i % 2) - 1e308 * (1 - i % 2)},1,2,3\n" for i in range(3000)),
+     "goes back"),
+    (_T, "only a header"),
+    ("", "holds no rows of numbers"),
+    ("\x00\xff\x1b[2J garbage\n" * 10, "not all numbers"),
+])
+def test_hostile_tables_get_a_message_not_a_traceback(tmp_path, content, message, capsys):
+    import warnings
+
+    path = tmp_path / "hostile.csv"
+    path.write_bytes(content.encode("utf-8", "surrogateescape"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no RuntimeWarning from numpy either
+        assert main(["noise", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err

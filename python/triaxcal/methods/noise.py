@@ -329,6 +329,11 @@ def noise_figures(
             f"the Allan deviation has only {len(ad.taus)} averaging times: the log is too short "
             "for noise figures (record at least a few minutes at rest)"
         )
+    if not np.isfinite(ad.adev).all():
+        raise CalibrationError(
+            "the Allan deviation overflows a double: readings this large are not a sensor's "
+            "(a wrong column, unit or scale?)"
+        )
     lo, hi = SAMPLE_RATE_HZ
     if not (lo <= ad.rate_hz <= hi and np.isfinite(_basis(ad.taus)).all()):
         raise CalibrationError(

@@ -358,7 +358,8 @@ class TimeBase:
             self.gap_rows += k
             self._open_gap = k == len(t)
         full = t if self.n == 0 else np.concatenate([[self.t_last], t])
-        d = np.diff(full)
+        with np.errstate(over="ignore"):  # stamps near the double's end: an inf step
+            d = np.diff(full)
         if len(d):
             k = int(np.argmax(d))
             if d[k] > self.gap:

@@ -209,7 +209,7 @@ REST_HORIZON_S = 10.0
 #: ``sample_log_small.ulg``, the three ``sunsided unmoved-*``, the first 45 s of the imu_tk
 #: Xsens log), 4.5 on a simulated day at 100 Hz (white noise, with or without a random walk),
 #: 4.3 to 4.9 on a 1 kHz stream through a second-order low-pass filter of 20 to 500 Hz.
-#: Moving, it is 34 or more (every moving real recording: the bags, the flights, turns, tilts
+#: Moving, it is 33.7 or more (every moving real recording: the bags, the flights, turns, tilts
 #: and pans by hand, the turntable; the gyroscopes 49 or more).
 REST_MAX_CHANGE_SIGMAS = 20.0
 #: The noise of a window mean is extrapolated from the shortest block of samples whose
