@@ -170,7 +170,7 @@ class NoiseRequest:
         if not isinstance(self.path, (str, os.PathLike)):
             raise CalibrationError(f"path must name a file, got {self.path!r}")
         set_(self, "path", Path(self.path))
-        options.choice(self.sensor, "sensor", SENSOR_CHOICES)
+        options.choice(self.sensor, opt("sensor"), SENSOR_CHOICES)
         sensors = self.sensors
         if self.columns is not None:
             if len(sensors) > 1:
@@ -498,7 +498,7 @@ class NoiseResult:
         if self.forced:
             raise CalibrationError(
                 "the figures were computed from readings that are not at rest "
-                f"({opt('force')}), and Kalibr's noise JSON has no place to say so: write "
+                f"({opt('force', True)}), and Kalibr's noise JSON has no place to say so: write "
                 "the Kalibr YAML (marked) or JSON figures instead, or record at rest"
             )
         return json.dumps(self.kalibr(), indent=2, allow_nan=False) + "\n"
@@ -552,7 +552,8 @@ def _finish(req: NoiseRequest, acc: dict[str, _Sensor], rate: float | None,
         f = noise_figures(ad, sensor=s)
         r = rests[s]
         if r.at_rest is False:
-            mark = f"computed although the readings are not at rest ({opt('force')}): {r.message}"
+            mark = (f"computed although the readings are not at rest ({opt('force', True)}): "
+                    f"{r.message}")
             f = dataclasses.replace(f, motion=r.message, warnings=(mark, *f.warnings))
         figs[s] = f
         if a.scale.note:

@@ -102,7 +102,8 @@ class RestCheck:
     at_s : float
         When the largest change ended, s from the start of the log.
     moving_s : float
-        About how long windows changed by more than ``allowed``, s.
+        About how long window means differed from one up to ``horizon_s`` earlier by more than
+        ``allowed``, s (a motion, and up to ``horizon_s`` after it).
     duration_s : float
         Length of the log, s.
     """
@@ -139,7 +140,7 @@ class RestCheck:
         return (
             f"the {name} {verb} {_fmt(self.change)} {u} (the change of its {self.window_s:.3g} s "
             f"mean {what} within {self.horizon_s:.3g} s, largest {self.at_s:.4g} s into the "
-            f"log; moving for about {self.moving_s:.3g} s of {self.duration_s:.4g} s; {rest}): "
+            f"{self.duration_s:.4g} s log; {rest}): "
             "the noise figures need the sensor at rest: record the board lying still (on a "
             "table, untouched, at a steady temperature), or cut the log to its still part"
         )
@@ -344,4 +345,4 @@ def check_rest(readings: Any, rate_hz: float, *, sensor: str | None = None,
 
 def not_at_rest(check: RestCheck) -> str:
     """The refusal for a sensor that moved: the finding and how to go on anyway."""
-    return f"{check.message}; or pass {opt('force')} to compute the figures anyway, marked"
+    return f"{check.message}; or pass {opt('force', True)} to compute the figures anyway, marked"
