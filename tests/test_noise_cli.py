@@ -418,8 +418,9 @@ def test_noise_then_export_to_kalibr_in_one_go(demo_dir, capture_session, tmp_pa
         TRUTH.white * math.pi / 180, rel=0.05)
     assert keys["accelerometer_noise_density"] == pytest.approx(1e-4 * 9.80665, rel=0.05)
     imu = tmp_path / "imu.yaml"
-    assert main(["export", cal, "--format", "kalibr", "--noise", str(noise), "--rate", "100",
-                 "-o", str(imu)]) == 0
+    export = ["export", cal, "--format", "kalibr", "--noise", str(noise), "--rate-hz", "100",
+              "--sensor-model", "MPU-6050:2g,250dps", "-o", str(imu)]  # the demo board
+    assert main(export) == 0, capsys.readouterr().err
     doc = yaml.safe_load(imu.read_text())
     for k, v in keys.items():
         assert doc[k] == pytest.approx(v, rel=1e-12)
@@ -428,8 +429,7 @@ def test_noise_then_export_to_kalibr_in_one_go(demo_dir, capture_session, tmp_pa
     noise.write_text(json.dumps(keys | {"gyroscope_random_walk": 2e-05,
                                         "accelerometer_random_walk": 4e-06}))
     assert "2e-05" in noise.read_text()
-    assert main(["export", cal, "--format", "kalibr", "--noise", str(noise), "--rate", "100",
-                 "-o", str(imu)]) == 0
+    assert main(export) == 0, capsys.readouterr().err
     doc = yaml.safe_load(imu.read_text())
     _floats_only(doc)
     assert doc["gyroscope_random_walk"] == 2e-05 and doc["accelerometer_random_walk"] == 4e-06
