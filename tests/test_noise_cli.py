@@ -461,6 +461,12 @@ def test_both_sensors_of_a_table_already_in_si_units(tmp_path, capsys):
     assert main(["noise", str(path), "--sensor", "both", "--unit", "m/s^2", "--unit", "rad/s",
                  "--format", "kalibr", "-o", str(out)]) == 0
     assert json.loads(out.read_text()) == keys
+    # one sensor's columns cannot give both sensors' figures
+    gyro_only = tmp_path / "gyro.csv"
+    np.savetxt(gyro_only, np.column_stack([np.arange(n) / rate, g]), delimiter=",",
+               header="t,x,y,z", comments="")
+    assert main(["noise", str(gyro_only), "--sensor", "both"]) == 1
+    assert "the columns of one sensor only" in capsys.readouterr().err
     # a unit of the wrong quantity is refused, naming the flag
     assert main(["noise", str(path), "--unit", "gyro=m/s^2"]) == 1
     assert "--unit: 'm/s^2' is not a unit of the gyroscope" in capsys.readouterr().err

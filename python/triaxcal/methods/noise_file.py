@@ -601,6 +601,11 @@ def _from_table(req: NoiseRequest, path: Path) -> NoiseResult:
         data = block.data
         if not cols:
             cols = {s: pick_columns(block, req.columns, s) for s in req.sensors}
+            if len(cols) > 1 and cols["gyro"] == cols["accel"]:
+                raise CalibrationError(
+                    f"{path} has the columns of one sensor only: read it with "
+                    f"{opt('sensor', 'gyro')} or {opt('sensor', 'accel')}"
+                )
             if block.names is not None and "t" in block.names:
                 tcol = block.names.index("t")
             if req.rate_hz is None:
