@@ -235,9 +235,13 @@ class NoiseRequest:
                                        f"{opt('counts_per_unit')}, not both")
             parts = {s: _part(self.cal, s) for s in sensors}
             for s, p in parts.items():
-                m = np.asarray(getattr(p, "matrix", None), dtype=np.float64)
+                try:
+                    m = np.asarray(getattr(p, "matrix", None), dtype=np.float64)
+                except (TypeError, ValueError):
+                    m = np.zeros(0)
                 if m.shape != (3, 3) or not np.isfinite(m).all():
-                    raise CalibrationError(f"{self.cal_name}: the {s} part has no 3x3 matrix")
+                    raise CalibrationError(f"{self.cal_name}: the {s} part has no finite 3x3 "
+                                           "matrix")
             set_(self, "cal", parts)
         set_(self, "unit", units)
         set_(self, "counts_per_unit", cpu)
