@@ -10,7 +10,8 @@
 * :mod:`~triaxcal.methods.allan` -- overlapping Allan deviation, streamed through the Rust core.
 * :mod:`~triaxcal.methods.bootstrap` -- bootstrap confidence intervals of fit coefficients.
 * :mod:`~triaxcal.methods.noise` -- noise figures (random walks, bias instability) and Kalibr's
-  noise keys.
+  noise keys; :mod:`~triaxcal.methods.rest` -- whether a sensor was at rest;
+  :mod:`~triaxcal.methods.noise_file` -- both from a recording (``triaxcal noise``).
 * :mod:`~triaxcal.methods.yaw` -- yaw-only magnetometer calibration (turns about the
   vertical, the vertical part from the World Magnetic Model).
 * :mod:`~triaxcal.methods.alignment` -- magnetometer-to-accelerometer alignment, mounting
@@ -43,6 +44,8 @@ from .gyro import (
 )
 from .imu import ImuCalibration, SweepStep, TriadCalibration, calibrate_imu
 from .noise import AxisNoise, NoiseFigures, kalibr_noise, noise_figures, plot_allan
+from .noise_file import NoiseRequest, NoiseResult, noise_from_file
+from .rest import NotAtRestError, RestCheck, check_rest
 from .static import (
     FerrarisCalibration,
     SixPosition,
@@ -64,10 +67,16 @@ __all__ = [
     "AxisNoise",
     "BootstrapIntervals",
     "NoiseFigures",
+    "NoiseRequest",
+    "NoiseResult",
+    "NotAtRestError",
+    "RestCheck",
     "allan",
     "bootstrap",
+    "check_rest",
     "kalibr_noise",
     "noise_figures",
+    "noise_from_file",
     "plot_allan",
     "YawCalibration",
     "fit_yaw",
