@@ -57,10 +57,11 @@ def command_line() -> Iterator[None]:
         _CLI.reset(token)
 
 
-def opt(name: str, value: Any = _MISSING) -> str:
-    """The option ``name`` (its Python name), with ``value`` if given, as the user wrote it."""
+def opt(name: str, value: Any = _MISSING, *, flag: str | None = None) -> str:
+    """The option ``name`` (its Python name), with ``value`` if given, as the user wrote it;
+    ``flag`` names its command-line spelling where that is not the name with dashes."""
     if _CLI.get():
-        flag = _FLAGS.get(name, "--" + name.replace("_", "-"))
+        flag = flag or _FLAGS.get(name, "--" + name.replace("_", "-"))
         if value is _MISSING:
             return flag
         if value is True:
