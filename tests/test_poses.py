@@ -117,7 +117,7 @@ def test_command_line_options_map_to_settings():
     s = settings_from_args(p.parse_args(["--window", "50", "--accel-threshold", "0.05",
                                          "--gyro-threshold", "40", "--mag-threshold", "off",
                                          "--holdoff", "2", "--rate-hz", "100",
-                                         "--units-per-g", "8192"]))
+                                         "--counts-per-g", "8192"]))
     assert s == PoseSettings(window=50, accel_threshold_g=0.05, gyro_threshold=40.0,
                              use_mag=False, holdoff_s=2.0, rate_hz=100.0, counts_per_g=8192.0)
     for bad in (["--window", "0"], ["--gyro-threshold", "-3"], ["--holdoff", "nan"],

@@ -37,6 +37,16 @@ _FLAGS = {
     "holdoff_s": "--holdoff",
     "offsets_only": "--offsets-only",
     "counts_per_unit": "--counts-per-unit",
+    "angle_deg": "--angle",
+    "rest_s": "--rest",
+    "offset": "--bias",
+    "gyro_offset": "--bias",
+    "nominal_counts_per_dps": "--counts-per-unit",
+    "require_both_directions": "--both-directions",
+    "gyro_g_sensitivity": "--g-sensitivity",
+    "min_still_s": "--min-still",
+    "max_asymmetry_pct": "--max-asymmetry",
+    "rates": "--rpm",
 }
 
 _MISSING = object()
