@@ -43,10 +43,8 @@ _FLAGS = {
     "gyro_offset": "--bias",
     "nominal_counts_per_dps": "--counts-per-unit",
     "require_both_directions": "--both-directions",
-    "gyro_g_sensitivity": "--g-sensitivity",
     "min_still_s": "--min-still",
     "max_asymmetry_pct": "--max-asymmetry",
-    "rates": "--rpm",
 }
 
 _MISSING = object()

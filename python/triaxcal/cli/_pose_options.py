@@ -30,7 +30,8 @@ def positive_float(text: str) -> float:
     return v
 
 
-def _nonnegative_float(text: str) -> float:
+def nonnegative_float(text: str) -> float:
+    """An argparse type: a finite number >= 0."""
     try:
         v = float(text)
     except ValueError:
@@ -105,7 +106,7 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
                    help="register a pose once it has been still for W windows (the capture's "
                         "bell, the seed's beep), then average it until the board moves; 'off': "
                         "decide when the board moves (default %(default)s)")
-    g.add_argument("--holdoff", type=_nonnegative_float, default=_D.holdoff_s, metavar="S",
+    g.add_argument("--holdoff", type=nonnegative_float, default=_D.holdoff_s, metavar="S",
                    help="seconds ignored after each registered pose, to let go of the board "
                         "(the seed waits 2 s after its beep: --holdoff 2). Default 0")
     g.add_argument("--rate-hz", type=positive_float, default=None, metavar="HZ",

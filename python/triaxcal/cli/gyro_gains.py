@@ -40,7 +40,7 @@ from ..report.text import coefficient_table
 from ._calfile import add_output_options, existing_part, save_part
 from ._help import renamed
 from ._method_options import add_bias_option, bias_from_args, counts_per_unit, nominal
-from ._pose_options import positive_float
+from ._pose_options import nonnegative_float, positive_float
 
 HELP = "gyroscope gains from turns of a known angle, both ways about each axis (the seed's)"
 
@@ -105,7 +105,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     renamed(p, "--nominal", "--counts-per-unit")
     p.add_argument("--both-directions", action="store_true",
                    help="fail unless every axis was turned both ways")
-    p.add_argument("--max-asymmetry", type=float, default=3.0, metavar="PCT",
+    p.add_argument("--max-asymmetry", type=nonnegative_float, default=3.0, metavar="PCT",
                    help="warn when an axis's clockwise and counter-clockwise gains differ by "
                         "more than this (default 3 %%)")
     p.add_argument("--raw-unit", default="counts", help="unit of the readings (counts)")

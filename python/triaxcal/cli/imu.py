@@ -44,7 +44,7 @@ from ._method_options import (
     time_column,
     triad_columns,
 )
-from ._pose_options import positive_float
+from ._pose_options import nonnegative_float, positive_float, positive_int
 
 HELP = "accelerometer and gyroscope from still poses and turns by hand (Tedaldi, imu_tk)"
 
@@ -70,7 +70,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--rest", type=positive_float, default=3.0, metavar="S",
                    help="seconds still at the start, from which the detector learns the noise "
                         "(default 3; longer is better)")
-    p.add_argument("--min-still", type=float, default=1.0, metavar="S",
+    p.add_argument("--min-still", type=nonnegative_float, default=1.0, metavar="S",
                    help="shortest still pose, seconds (default 1)")
     p.add_argument("--accel-model", choices=("auto", "full", "axis"), default="auto",
                    help="the accelerometer's matrix: full (symmetric 3x3), axis (three gains), "
@@ -80,7 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="one constant gyro bias (imu_tk's) instead of a bias that depends on "
                         "the acceleration")
     add_bias_option(p, "the still poses")
-    p.add_argument("--max-iter", type=int, default=50, metavar="N",
+    p.add_argument("--max-iter", type=positive_int, default=50, metavar="N",
                    help="most Levenberg-Marquardt iterations of the gyro fit (default 50)")
     add_triad_options(p)
     add_output_options(p)
