@@ -76,10 +76,11 @@ def test_the_grammar_of_every_command():
         if "-o" in opts or "--output" in opts:
             assert opts["-o"] is opts["--output"], name
             assert "DIR" not in (opts["-o"].metavar or ""), name
-        # a sample rate is --rate-hz (export's Kalibr update rate and noise's input rate are
-        # their own developers' to rename)
-        if name not in ("export", "noise"):
+        # a sample rate is --rate-hz (noise's is its own developer's to rename); --topic is an
+        # input topic (the Kalibr export's output topic is --ros-topic)
+        if name != "noise":
             assert "--rate" not in opts and "--poll-hz" not in opts, name
+        assert "--topic" not in opts or "NAME" == opts["--topic"].metavar, name
     # the commands that write a calibration name it CAL.json
     for name in ("fit", "sphere-center", "tilt-rig", "gyro-gains", "temperature", "ferraris",
                  "imu", "turntable"):

@@ -91,9 +91,16 @@ def test_settings_are_validated():
         PoseSettings.from_dict({"window": 25, "mystery": 1})
     with pytest.raises(tc.CalibrationError, match="accelerometer"):
         PoseSettings().resolve(("t", "gx", "gy", "gz"), np.zeros((10, 4)))
-    with pytest.raises(tc.CalibrationError, match="--rate-hz"):
+    # the API's names; a command's flags when a command runs
+    from triaxcal._checks.spelling import command_line
+
+    with pytest.raises(tc.CalibrationError, match=r"holdoff_s needs .* \(rate_hz;"):
         PoseSettings(holdoff_s=2).resolve(("ax", "ay", "az"), np.ones((10, 3)))
-    with pytest.raises(tc.CalibrationError, match="--counts-per-g"):
+    with pytest.raises(tc.CalibrationError, match=r"\(counts_per_g\)"):
+        PoseSettings().resolve(("ax", "ay", "az"), np.zeros((10, 3)))
+    with command_line(), pytest.raises(tc.CalibrationError, match=r"--holdoff needs .*--rate-hz"):
+        PoseSettings(holdoff_s=2).resolve(("ax", "ay", "az"), np.ones((10, 3)))
+    with command_line(), pytest.raises(tc.CalibrationError, match="--counts-per-g"):
         PoseSettings().resolve(("ax", "ay", "az"), np.zeros((10, 3)))
     assert PoseSettings.from_dict(PoseSettings(holdoff_s=2.0).to_dict()) == PoseSettings(
         holdoff_s=2.0)

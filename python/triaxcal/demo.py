@@ -38,7 +38,15 @@ from .fit.ellipsoid import EllipsoidFit, fit_ellipsoid
 from .io.protocol import PROTOCOLS
 from .io.serial import SerialReader
 from .quality.coverage import coverage, coverage_warning
-from .sim import GYRO_COUNTS_PER_DPS, SensorTruth, SimDevice, SimIMU, globe_script, tumble_script
+from .sim import (
+    GYRO_COUNTS_PER_DPS,
+    SIM_COUNTS_PER_UNIT,
+    SensorTruth,
+    SimDevice,
+    SimIMU,
+    globe_script,
+    tumble_script,
+)
 
 __all__ = ["RATE_HZ", "WITHIN_SIGMA", "run_demo"]
 
@@ -102,7 +110,8 @@ def run_demo(
 
             page = LivePage(reader, session, columns=channel_names(protocol, channels),
                             options=LiveOptions(mag_radius=f"{imu.truth.field_ut:g}uT",
-                                                out_dir=out / "live", detection=settings),
+                                                out_dir=out / "live", detection=settings,
+                                                counts_per_unit=SIM_COUNTS_PER_UNIT),
                             host=live["host"], port=live["port"],
                             open_browser=live["open_browser"], progress=progress,
                             mode="overwrite").start()
@@ -236,7 +245,8 @@ def _analyse(out: Path, session: Path, protocol: str, speed: float, seed: int, p
         sensor_id=f"triaxcal-sim-seed{seed}",
     )
     outputs = write_outputs(
-        cal, {"accel": means[:, a_cols], "mag": means[:, m_cols]}, out, plot=plot
+        cal, {"accel": means[:, a_cols], "mag": means[:, m_cols]}, out, plot=plot,
+        counts_per_unit=SIM_COUNTS_PER_UNIT,  # the simulated board's driver scale
     )
     results["outputs"] = {k: str(v) for k, v in outputs.items()}
     path = out / "results.json"

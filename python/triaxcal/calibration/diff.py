@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ..conventions.names import CELL, COEFFICIENTS
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
 from .file import SENSORS, Calibration
@@ -39,10 +40,8 @@ from .part import SensorCalibration
 
 __all__ = ["CalibrationDiff", "CoefficientChange", "PartDiff", "compare"]
 
-NAMES = ("offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
-         "offdiag_xy", "offdiag_xz", "offdiag_yz")
-_CELL = {"diag_x": (0, 0), "diag_y": (1, 1), "diag_z": (2, 2), "offdiag_xy": (0, 1),
-         "offdiag_xz": (0, 2), "offdiag_yz": (1, 2)}
+NAMES = COEFFICIENTS
+_CELL = CELL
 _RANK = {"same": 0, "changed": 1, "suspicious": 2}
 EXIT_CODES = {"same": 0, "changed": 3, "suspicious": 4}
 

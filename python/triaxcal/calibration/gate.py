@@ -2,7 +2,7 @@
 
 A fit can converge and still not be a calibration: readings that do not lie on an ellipsoid at
 all, that cover a cap or a band of the sphere too small for the model, that carry only
-directions, or coefficients no sensor has. :func:`check` says so, with the reasons in words and
+directions, or coefficients no sensor has. :func:`check_part` says so, with the reasons in words and
 what to record instead. Everything that writes or ships a calibration calls it: ``triaxcal fit``
 and ``batch``, the live page's Save, the methods' ``part_from_*``, every export, ``send``.
 Nothing refused is written unless the user forces it (``--force``, ``force=True``); then the
@@ -56,7 +56,7 @@ __all__ = [
     "RECORD_INSTEAD",
     "InvalidCalibrationError",
     "Verdict",
-    "check",
+    "check_part",
     "direction_stats",
     "judged",
     "require_valid",
@@ -273,7 +273,7 @@ def _direction_reasons(part: SensorCalibration, d: dict[str, Any]) -> list[str]:
 _FIT_MODELS = ("sphere", "axis", "full")
 
 
-def check(part: SensorCalibration, sensor: str, *, points: Any = None) -> Verdict:
+def check_part(part: SensorCalibration, sensor: str, *, points: Any = None) -> Verdict:
     """Judge ``part`` (of ``sensor``): is it a calibration?
 
     Parameters
@@ -291,10 +291,9 @@ def check(part: SensorCalibration, sensor: str, *, points: Any = None) -> Verdic
     Examples
     --------
     >>> import numpy as np, triaxcal as tc
-    >>> from triaxcal.calibration.gate import check
     >>> part = tc.SensorCalibration(offset=[0, 0, 20.0], matrix=np.eye(3), raw_unit="m/s^2",
     ...                             unit="m/s^2", radius=9.80665, model="axis")
-    >>> v = check(part, "accel")
+    >>> v = tc.check_part(part, "accel")
     >>> v.valid, v.reasons[0][:39]
     (False, 'its offset reaches 20 m/s^2 on one axis')
     """
@@ -361,7 +360,7 @@ def require_valid(part: SensorCalibration, sensor: str, *, force: bool = False,
     elif part.valid is True:
         verdict = Verdict(True, (), sensor)
     else:
-        verdict = check(part, sensor)
+        verdict = check_part(part, sensor)
     if not verdict.valid and not force:
         raise InvalidCalibrationError(
             f"refused to {action} it: the {sensor} part is not a valid calibration: "

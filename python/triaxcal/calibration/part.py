@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from .._checks.arrays import as_points
+from ..conventions.names import AXES, LOWER, UPPER
 from ..errors import CalibrationError
 from ..methods.field import ExpectedField
 from . import schema as _schema
@@ -36,9 +37,9 @@ __all__ = ["MAX_PREVIOUS", "SensorCalibration", "TemperatureTerms", "sha256_poin
 #: Most summaries of replaced calibrations a part keeps (newest first).
 MAX_PREVIOUS = _schema.MAX_PREVIOUS
 
-_AXES = ("x", "y", "z")
-_UPPER = ((0, 1), (0, 2), (1, 2))  # xy, xz, yz
-_LOWER = ((1, 0), (2, 0), (2, 1))  # yx, zx, zy
+_AXES = AXES
+_UPPER = UPPER  # xy, xz, yz
+_LOWER = LOWER  # yx, zx, zy
 
 
 def _now_utc() -> str:

@@ -45,10 +45,11 @@ import numpy as np
 from .._checks.spelling import opt
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
-from .gate import check, judged
+from .gate import check_part, judged
 from .part import SensorCalibration, TemperatureTerms
 
 __all__ = [
+    "part_from_autocal",
     "part_from_yaw",
     "fold_asa",
     "part_from_center",
@@ -364,7 +365,7 @@ def _triad_parts(accel: Any, gyro: Any, g_sensitivity: Any, *, method: str, grav
                                   stats=g_st, source=source, input_sha256=input_sha256),
     }
     # judge both before returning either: nothing is written unless both pass (or force)
-    verdicts = {k: check(p, k) for k, p in parts.items()}
+    verdicts = {k: check_part(p, k) for k, p in parts.items()}
     for k, v in verdicts.items():
         if not v.valid and not force:
             judged(parts[k], v)  # raises InvalidCalibrationError, naming the sensor
@@ -581,4 +582,31 @@ def gated(part: SensorCalibration, sensor: str | None = None, *,
     the part's calibrated unit (none for raw counts: then only the checks that need no sensor
     run)."""
     s = _sensor_of(part, sensor)
-    return judged(part, check(part, s or "part"), force=force)
+    return judged(part, check_part(part, s or "part"), force=force)
+
+
+def part_from_autocal(cal: Any, *, source: str | None = None, force: bool = False
+                      ) -> SensorCalibration:
+    """A free-living auto-calibration (:class:`~triaxcal.methods.autocal.AutoCalibration`) as a
+    part: g -> g, ``matrix = diag(gain)``, the temperature terms in ``offset_poly``; through
+    the validity gate (``force``: see the module notes)."""
+    temp = None
+    if cal.temp_ref_c is not None and cal.temp_range_c is not None:
+        temp = TemperatureTerms(temp_ref_c=cal.temp_ref_c, temp_range_c=cal.temp_range_c,
+                                offset_poly=np.vstack([np.zeros(3), cal.temp_coef]))
+    stats = {
+        "method": "van Hees et al. 2014 (free-living, still 10 s windows)",
+        "accepted": cal.accepted,
+        "status": cal.status,
+        "error_before_g": cal.error_before_g,
+        "error_after_g": cal.error_after_g,
+        "n_windows": cal.n_windows,
+        "n_still": cal.n_still,
+        "hours": cal.hours,
+        "iterations": cal.iterations,
+        "settings": cal.settings,
+    }
+    part = SensorCalibration(offset=cal.offset, matrix=np.diag(cal.gain), raw_unit="g",
+                             unit="g", radius=1.0, model="autocal-vanhees",
+                             temperature=temp, stats=stats, source=source)
+    return gated(part, "accel", force=force)

@@ -44,6 +44,7 @@ from ..fit.ellipsoid import MODELS
 
 __all__ = [
     "MAX_BOOTSTRAP",
+    "OUTLIER_RULES",
     "REJECTION_RULES",
     "FieldOptions",
     "FitRequest",
@@ -61,6 +62,11 @@ MAX_ROUNDS = 1000
 #: How outliers are judged: ``"calibrated"`` lengths (the default, after a first fit) or
 #: ``"raw"`` lengths in the first round (exactly Magneto's rule).
 REJECTION_RULES = ("calibrated", "raw")
+
+#: Outlier rules: ``"robust"`` (modified z-score of the calibrated lengths above 3.5; keeps clean
+#: data), ``"sigma"`` (more than ``sigma`` standard deviations from the mean length, iterated),
+#: ``"magneto"`` (exactly Magneto's: one pass of 2 sigma on raw lengths), ``"none"``.
+OUTLIER_RULES = ("robust", "sigma", "magneto", "none")
 
 _UNITS_EXACT = ("g", "mg", "m/s^2", "uT", "nT", "mT", "gauss", "mG", "deg/s", "rad/s", "counts")
 _UNIT_ALIASES = {"m/s2": "m/s^2", "mps2": "m/s^2", "ut": "uT", "µt": "uT", "dps": "deg/s",
@@ -270,9 +276,13 @@ class FitRequest:
         Calibrated unit to record (``--unit``; default: from the radius).
     raw_unit : str, optional
         Unit of the raw readings (``--raw-unit``; default: counts, or a log's own unit).
+    outliers : {"robust", "sigma", "magneto", "none"}
+        The outlier rule (``--outliers``; see :data:`OUTLIER_RULES` and
+        :func:`triaxcal.fit_robust`). The default, ``"robust"``, keeps clean data and drops
+        gross errors; ``"magneto"`` reproduces Magneto exactly.
     sigma : float
-        Outlier rule: readings whose length is more than ``sigma`` standard deviations from
-        the mean are rejected, iterated (``--sigma``); 0 disables.
+        The sigma rule's threshold: readings whose length is more than ``sigma`` standard
+        deviations from the mean are rejected, iterated (``--sigma``); 0 disables.
     rounds : int
         Most reject-and-refit rounds (``--rounds``); 1 = a single pass, like Magneto.
     reject_on : {"calibrated", "raw"}
@@ -292,6 +302,7 @@ class FitRequest:
     radius: str | float | None = None
     unit: str | None = None
     raw_unit: str | None = None
+    outliers: str = "robust"
     sigma: float = 2.0
     rounds: int = 10
     reject_on: str = "calibrated"
@@ -328,6 +339,9 @@ class FitRequest:
                                    f"got {s!r}")
         object.__setattr__(self, "sigma", float(s))
         _whole(self.rounds, f"{opt('rounds')}", 0, MAX_ROUNDS)
+        if self.outliers not in OUTLIER_RULES:
+            raise CalibrationError(f"{opt('outliers')} must be one of "
+                                   f"{', '.join(OUTLIER_RULES)}, got {str(self.outliers)[:32]!r}")
         if self.reject_on not in REJECTION_RULES:
             raise CalibrationError(f"{opt('reject_on')} must be one of "
                                    f"{', '.join(REJECTION_RULES)}, got {self.reject_on!r}")
@@ -401,3 +415,10 @@ class FitRequest:
     def replace(self, **changes: Any) -> FitRequest:
         """A copy with some fields changed (validated again)."""
         return replace(self, **changes)
+
+    def rejection(self) -> dict[str, Any]:
+        """The keyword arguments of :func:`triaxcal.fit_robust` that carry the outlier rule."""
+        if self.outliers == "magneto":
+            return {"rule": "sigma", "sigma": 2.0, "max_rounds": 1, "lengths": "raw"}
+        return {"rule": self.outliers, "sigma": self.sigma, "max_rounds": self.rounds,
+                "lengths": self.reject_on}

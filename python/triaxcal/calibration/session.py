@@ -18,7 +18,7 @@ from ..io.tables import Table
 from ..methods.field import ExpectedField
 from ..quality.bounds import implausible_radius
 from ..quality.coverage import coverage, coverage_warning
-from .gate import Verdict, check, direction_stats, judged
+from .gate import Verdict, check_part, direction_stats, judged
 from .part import SensorCalibration
 from .parts import fold_asa
 from .request import FitRequest
@@ -108,13 +108,13 @@ def fit_session(
     fitted = pts
     if req.asa is not None:
         fitted = apply_asa(pts, req.asa)  # adjusted before fitting, folded back below
-    rob = fit_robust(fitted, model=req.model, radius=radius, sigma=req.sigma,
-                     max_rounds=req.rounds, lengths=req.reject_on,
+    rob = fit_robust(fitted, model=req.model, radius=radius, **req.rejection(),
                      fixed=dict(req.fixed) or None)
     extra: dict[str, Any] = {
         "columns": src.columns,
         "poses": bool(req.source.poses),
         "n_input": len(pts),
+        "outliers": req.outliers,
         "sigma": float(req.sigma),
         "rejection_rounds": int(rob.rounds),
     }
@@ -189,7 +189,7 @@ def fit_to_file(
     before = existing_calibration(output, new=new)
     accel = before.accel if before is not None else None
     out = fit_session(data, request, accel=accel)
-    verdict = check(out.part, out.sensor)
+    verdict = check_part(out.part, out.sensor)
     out.part = judged(out.part, verdict, force=force)
     align_text = None
     if request.field.align:

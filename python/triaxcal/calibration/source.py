@@ -104,6 +104,7 @@ def load_source(path: str | Path, sensor: str, options: SourceOptions | None = N
         "topic": list(topic) if topic else None, "undo_autopilot_cal": undo,
         "calibrated_by_autopilot": stream.calibrated, "samples": len(stream),
         "rate_hz": stream.rate_hz,
+        "device_id": (rec.meta.get("device_ids") or {}).get(sensor),
     }}
     if opts.poses:
         pts, pose_stats = _log_pose_points(rec, sensor, opts.detection)

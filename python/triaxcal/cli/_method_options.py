@@ -1,11 +1,11 @@
-"""Options the method commands share: ``--counts-per-unit`` (one syntax everywhere), ``--bias``
+"""Options the method commands share: ``--counts-per-unit`` (the export's syntax), ``--bias``
 (a gyroscope's bias from a recording at rest), ``--gravity`` and the two-sensor column options.
 
-``--counts-per-unit [SENSOR=]COUNTS[:UNIT]``: a sensor's nominal sensitivity, raw counts per
-unit, as the board's driver or the datasheet gives it (``gyro=131:deg/s``, ``accel=16384:g``,
-``mag=10:uT``). Repeat it, or comma-separate, for several sensors; a command that reads one
-sensor takes it without ``SENSOR=``, and the unit defaults to the sensor's usual one
-(:data:`~triaxcal.conventions.units.DEVICE_COUNTS_PER_UNIT`).
+``--counts-per-unit SENSOR=COUNTS[:UNIT]`` is the one syntax of the command line
+(:func:`triaxcal.export._trust.parse_counts_per_unit`, as ``export`` and ``send`` take it): a
+sensor's nominal sensitivity, raw counts per unit, as its driver or datasheet gives it
+(``gyro=131:deg/s``). A command that reads one sensor also takes it without ``SENSOR=``; the
+unit defaults to the sensor's usual one (g, deg/s, uT).
 """
 
 from __future__ import annotations
@@ -13,63 +13,52 @@ from __future__ import annotations
 import argparse
 import math
 import re
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from ..conventions.names import SENSORS
-from ..conventions.units import DEVICE_COUNTS_PER_UNIT, UNITS, unit_factor
+from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
 
-__all__ = ["CountsPerUnit", "IMUCAL_COLUMNS", "add_bias_option", "add_triad_options",
-           "bias_from_args", "counts_per_unit", "gravity_type", "nominal", "three_numbers",
-           "time_column", "triad_columns"]
-
-#: One ``--counts-per-unit`` item: (sensor or None, counts, unit or None).
-CountsPerUnit = tuple[str | None, float, str | None]
+__all__ = ["IMUCAL_COLUMNS", "add_bias_option", "add_triad_options", "bias_from_args",
+           "counts_per_unit", "gravity_type", "nominal", "three_numbers", "time_column",
+           "triad_columns"]
 
 
-def counts_per_unit(text: str) -> list[CountsPerUnit]:
-    """An argparse type: ``[SENSOR=]COUNTS[:UNIT][,...]``.
+def counts_per_unit(sensor: str) -> Callable[[str], tuple[float, str]]:
+    """An argparse type for the ``--counts-per-unit`` of a command that reads ``sensor`` only:
+    ``[SENSOR=]COUNTS[:UNIT]`` -> (counts, unit).
 
-    >>> counts_per_unit("gyro=131:deg/s,accel=16384")
-    [('gyro', 131.0, 'deg/s'), ('accel', 16384.0, None)]
-    >>> counts_per_unit("16.4")
-    [(None, 16.4, None)]
+    >>> parse = counts_per_unit("gyro")
+    >>> parse("16.4"), parse("gyro=7505:rad/s")
+    ((16.4, 'deg/s'), (7505.0, 'rad/s'))
     """
-    out: list[CountsPerUnit] = []
-    for item in (s.strip() for s in str(text)[:200].split(",")):
-        sensor, eq, rest = item.partition("=")
-        if not eq:
-            sensor, rest = "", item
-        value, _, unit = rest.partition(":")
-        sensor, unit = sensor.strip(), unit.strip()
+    from ..export._trust import parse_counts_per_unit
+
+    def parse(text: str) -> tuple[float, str]:
+        t = str(text)[:200]
         try:
-            v = float(value)
-        except ValueError:
-            v = math.nan
-        if ((sensor and sensor not in SENSORS) or (unit and unit not in UNITS)
-                or not (math.isfinite(v) and v > 0)):
+            scales = parse_counts_per_unit(t if "=" in t else f"{sensor}={t}")
+        except CalibrationError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        if set(scales) != {sensor}:
             raise argparse.ArgumentTypeError(
-                f"{item[:40]!r}: use [SENSOR=]COUNTS[:UNIT], e.g. gyro=131:deg/s, "
-                "accel=16384:g, mag=10:uT (counts > 0; units: " + ", ".join(sorted(UNITS)) + ")")
-        out.append((sensor or None, v, unit or None))
-    return out
+                f"{t[:40]!r}: this command reads the {sensor} only: give {sensor}=COUNTS[:UNIT]")
+        return scales[sensor]
+
+    return parse
 
 
-def nominal(items: list[list[CountsPerUnit]] | None, sensor: str, unit: str) -> float | None:
-    """The counts per ``unit`` of ``sensor`` among the parsed ``--counts-per-unit`` options
-    (None when not given); an item without a sensor is this sensor's."""
-    found = [(c, u) for group in items or [] for s, c, u in group if s in (None, sensor)]
-    if not found:
+def nominal(scale: tuple[float, str] | None, unit: str) -> float | None:
+    """Counts per ``unit`` from a parsed ``--counts-per-unit`` (None when not given).
+
+    >>> round(nominal((7505.0, "rad/s"), "deg/s"), 2)
+    130.99
+    """
+    if scale is None:
         return None
-    if len(found) > 1:
-        raise CalibrationError(f"--counts-per-unit names the {sensor} more than once")
-    counts, given = found[0]
-    given = given or DEVICE_COUNTS_PER_UNIT[sensor][1]
-    if UNITS[given][0] != UNITS[unit][0]:
-        raise CalibrationError(f"--counts-per-unit {counts:g}:{given}: the {sensor} reads "
-                               f"{unit}, not {given}")
+    counts, given = scale
     return counts * unit_factor(unit, given)  # counts per `given` -> counts per `unit`
 
 

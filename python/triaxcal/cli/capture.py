@@ -148,6 +148,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     renamed(p, "--poll-hz", "--rate-hz")
     renamed(p, "--out", "--output")
     add_live_options(p)
+    from .export import add_scale_options
+
+    add_scale_options(p.add_argument_group(
+        "live page's Send: the board driver's scale (the MotionCal packet is in m/s^2, rad/s, "
+        "uT)"))
     p.set_defaults(func=run)
 
 
@@ -252,7 +257,7 @@ def run(args: argparse.Namespace) -> int:
 
         result = live_capture(
             reader, args.output, columns=names, mode=mode, detection=detection,
-            options=LiveOptions(detection=detection),
+            options=LiveOptions(detection=detection, **_live_scale(args)),
             host=args.http_host, port=args.http_port, open_browser=not args.no_browser,
             progress=None if args.quiet else out, notices=out, **kwargs)
     else:
@@ -271,3 +276,12 @@ def run(args: argparse.Namespace) -> int:
         file=out,
     )
     return 0
+
+
+def _live_scale(args: argparse.Namespace) -> dict[str, Any]:
+    from .export import scale_options
+
+    d = scale_options(args)
+    if "sensor_model" in d:
+        d["sensor_model"] = tuple(d["sensor_model"])
+    return d

@@ -78,5 +78,3 @@ def _print_result(args: argparse.Namespace, result: dict[str, Any]) -> None:
     if not args.no_plot and not any(k.startswith("figure_") for k in result["outputs"]):
         print("report figures skipped: matplotlib is not installed "
               "(pip install 'triaxcal[plot]')")
-
-

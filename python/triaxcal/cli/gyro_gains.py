@@ -97,7 +97,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "when stamps repeat")
     p.add_argument("--rest", type=positive_float, default=3.0, metavar="S",
                    help="seconds of rest at the start, to learn the noise (default 3)")
-    p.add_argument("--counts-per-unit", type=counts_per_unit, action="append", default=None,
+    p.add_argument("--counts-per-unit", type=counts_per_unit("gyro"), default=None,
                    metavar="[gyro=]COUNTS[:UNIT]",
                    help="the datasheet gain (131 at +-250 deg/s, 16.4 at +-2000; unit deg/s "
                         "unless given), to judge which turns are partial (default: from the "
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     stamps = t if args.rate_hz is None and t is not None and bool(np.all(np.diff(t) > 0)) \
         else None
     offset, bias_stats = bias_from_args(args, args.columns)
-    per_dps = nominal(args.counts_per_unit, "gyro", "deg/s")
+    per_dps = nominal(args.counts_per_unit, "deg/s")
     res = gyro_gains(g, angle_deg=args.angle, t=stamps,
                      rate_hz=None if stamps is not None else rate, rest_s=args.rest,
                      require_both_directions=args.both_directions,

@@ -75,7 +75,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="samples per averaging window of the plateau detection (default 50)")
     p.add_argument("--unit", choices=tuple(PER_RPM), default=None,
                    help="calibrated unit (default: the readings' rate unit, else rad/s)")
-    p.add_argument("--counts-per-unit", type=counts_per_unit, action="append", default=None,
+    p.add_argument("--counts-per-unit", type=counts_per_unit("gyro"), default=None,
                    metavar="[gyro=]COUNTS[:UNIT]",
                    help="readings in counts: the datasheet's scale (131 counts per deg/s at "
                         "+-250 deg/s), to find the plateaus in counts")
@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     if raw_rate:  # raw per unit: 1 deg/s reads unit_factor("deg/s", raw) raw units
         raw_per_unit = unit_factor(unit, args.raw_unit)
     else:
-        per = nominal(args.counts_per_unit, "gyro", unit)
+        per = nominal(args.counts_per_unit, unit)
         if per is None:
             raise CalibrationError(
                 f"readings in {args.raw_unit}: give the gyro's scale to find the plateaus in "

@@ -11,7 +11,6 @@ import math
 from ..errors import CalibrationError
 
 __all__ = [
-    "DEVICE_COUNTS_PER_UNIT",
     "STANDARD_GRAVITY",
     "UNITS",
     "per_unit",
@@ -34,14 +33,6 @@ UNITS: dict[str, tuple[str, float]] = {
     "G": ("mag", 100.0),
     "mG": ("mag", 0.1),
 }
-
-#: Device scales of the project's simulator and AVR firmware: counts per unit.
-DEVICE_COUNTS_PER_UNIT: dict[str, tuple[float, str]] = {
-    "accel": (16384.0, "g"),
-    "gyro": (131.0, "deg/s"),
-    "mag": (10.0, "uT"),
-}
-
 
 def unit_factor(src: str, dst: str) -> float:
     """Factor that converts a value in ``src`` to ``dst`` (it multiplies).

@@ -23,7 +23,8 @@ import numpy as np
 
 from .._checks.spelling import opt
 from ..errors import CalibrationError
-from . import PoseDetection, PoseDetector, detect_poses
+from ._segmenter import PoseDetection
+from .poses import PoseDetector, detect_poses
 
 #: Last column of a session whose rows are the board's pose means (``capture --board-poses``):
 #: the samples each mean averages.

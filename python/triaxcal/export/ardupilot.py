@@ -48,7 +48,7 @@ Planner, MAVProxy (``param load``) and ArduPilot's own defaults parser
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -71,6 +71,7 @@ from ._params import (
     require_symmetric,
     shift_poly,
 )
+from ._trust import Prepared, Scales, comment_lines, mark_lines, prepare
 
 __all__ = ["ardupilot_params", "ardupilot_parm"]
 
@@ -106,17 +107,25 @@ def _compass(p: Physical, index: int, scale_mode: Any, offsets_max: float) -> di
                     "have_scale_factor) and documents 0..1.3")
     shape = m / scale if scale else m
     out: dict[str, float] = {}
+    if p.scale_source is not None:
+        why = (f"the part is in raw counts, converted with {p.scale_source}: if that is not "
+               "the scale the vehicle's compass driver uses, every offset is wrong by the "
+               "ratio; if it is, the hard iron is larger than ArduPilot accepts (a magnet or "
+               "steel next to the compass)")
+    else:
+        why = ("the hard iron is larger than ArduPilot accepts: a magnet or steel next to the "
+               "compass; move the compass away from it (or raise COMPASS_OFFS_MAX, offsets_max=)")
     for i, a in enumerate("XYZ"):
         out[f"COMPASS_OFS{n}_{a}"] = check_range(
             -float(p.offset[i]), -offsets_max, offsets_max, f"COMPASS_OFS{n}_{a}",
-            "ArduPilot refuses compass offsets beyond COMPASS_OFFS_MAX (default 1800 mG, at "
-            "most 3000; offsets_max= in Python); an offset this large usually means the fit "
-            "was not determined by the data")
+            f"ArduPilot refuses compass offsets beyond COMPASS_OFFS_MAX ({offsets_max:g} mG; "
+            f"default 1800, at most 3000); {why}")
     for i, a in enumerate("XYZ"):
         out[f"COMPASS_DIA{n}_{a}"] = check_range(
             float(shape[i, i]), 0.2, 5.0, f"COMPASS_DIA{n}_{a}",
             "ArduPilot accepts soft-iron diagonals only within 0.2..5 "
-            "(CompassCalibrator::fit_acceptable)")
+            "(CompassCalibrator::fit_acceptable)" + ("" if p.scale_source is None else
+                                                     f"; the scale used: {p.scale_source}"))
     for (i, j), a in zip(((0, 1), (0, 2), (1, 2)), "XYZ"):
         v = float(shape[i, j])
         if not abs(v) < 1.0:
@@ -150,8 +159,10 @@ def ardupilot_params(
     compass: int = 0,
     sensors: Iterable[str] | None = None,
     counts_per_unit: Mapping[str, Any] | None = None,
+    sensor_model: str | Sequence[str] | None = None,
     compass_scale: Any = "auto",
     offsets_max: float = 1800.0,
+    force: bool = False,
 ) -> dict[str, float]:
     """ArduPilot parameters (name -> value) for the parts of ``cal``.
 
@@ -169,7 +180,11 @@ def ardupilot_params(
     sensors : iterable of str, optional
         Which parts to write (default: every part present).
     counts_per_unit : dict, optional
-        The driver's scale for parts in raw counts: ``{"mag": (6.6667, "uT")}``.
+        The driver's scale for parts in raw counts: ``{"mag": (6.6667, "uT")}``. No scale is
+        assumed: a part in counts without one (here or from ``sensor_model``) is refused.
+    sensor_model : str or list of str, optional
+        The part(s), e.g. ``"ICM-20948"`` or ``"MPU-6050:2g,250dps"``: their datasheet scales
+        (:mod:`triaxcal.conventions.sensors`); ``counts_per_unit`` wins.
     compass_scale : "auto", float or None
         ``"auto"``: the matrix's geometric-mean gain goes to ``COMPASS_SCALE`` when within
         0.85..1.3 (``DIA``/``ODI`` keep the shape, as ArduPilot's calibrator stores them),
@@ -178,13 +193,33 @@ def ardupilot_params(
         ``None``.
     offsets_max : float
         The vehicle's ``COMPASS_OFFS_MAX`` in mG (default 1800, ArduPilot's default).
+    force : bool
+        Write parts the validity gate refuses (:func:`triaxcal.calibration.gate.require_valid`);
+        :func:`ardupilot_parm` then marks the file.
+
+    A part fitted on readings ArduPilot had already corrected is written as the composed
+    absolute calibration (:mod:`triaxcal.export._trust`), or refused with the reason.
 
     Returns
     -------
     dict
         Parameter name -> value, in the order written.
     """
+    return _ardupilot(cal, imu=imu, compass=compass, sensors=sensors,
+                      counts_per_unit=counts_per_unit, sensor_model=sensor_model,
+                      compass_scale=compass_scale, offsets_max=offsets_max, force=force)[0]
+
+
+def _ardupilot(cal: Calibration, *, imu: int = 0, compass: int = 0,
+               sensors: Iterable[str] | None = None,
+               counts_per_unit: Mapping[str, Any] | None = None,
+               sensor_model: str | Sequence[str] | None = None, compass_scale: Any = "auto",
+               offsets_max: float = 1800.0, force: bool = False
+               ) -> tuple[dict[str, float], Prepared]:
     chosen = pick_sensors(cal, sensors, ("accel", "gyro", "mag"), FMT)
+    prep = prepare(cal, chosen, fmt="ArduPilot parameters", force=force)
+    cal = prep.cal
+    scales = Scales(counts_per_unit, sensor_model)
     for name, v in (("imu", imu), ("compass", compass)):
         if not isinstance(v, int) or not 0 <= v <= 2:
             raise CalibrationError(f"{name} must be 0, 1 or 2 (ArduPilot's first three), got {v!r}")
@@ -192,7 +227,7 @@ def ardupilot_params(
     tcal: dict[str, tuple[np.ndarray, Physical]] = {}
     n, n1 = _n(imu), str(imu + 1)
     if "accel" in chosen:
-        p = physical(cal.part("accel"), "accel", "m/s^2", "m/s^2", counts_per_unit, fmt=FMT)
+        p = physical(cal.part("accel"), "accel", "m/s^2", "m/s^2", scales, fmt=FMT)
         scale = require_diagonal(p, FMT, "INS_ACCSCAL")
         offset = p.offset.copy()
         if p.offset_poly is not None:
@@ -209,7 +244,7 @@ def ardupilot_params(
                 "ArduPilot accepts accelerometer scales within 0.8..1.2 (AccelCalibrator "
                 "accept_result); check the calibration's units")
     if "gyro" in chosen:
-        p = physical(cal.part("gyro"), "gyro", "rad/s", "rad/s", counts_per_unit, fmt=FMT)
+        p = physical(cal.part("gyro"), "gyro", "rad/s", "rad/s", scales, fmt=FMT)
         require_identity(p, FMT)
         offset = p.offset.copy()
         if p.offset_poly is not None:
@@ -241,7 +276,7 @@ def ardupilot_params(
             # the fit knows no temperature terms: a vehicle's old ones would be applied on top
             out[f"{prefix}ENABLE"] = 0.0
     if "mag" in chosen:
-        p = physical(cal.part("mag"), "mag", "mG", "mG", counts_per_unit, fmt=FMT)
+        p = physical(cal.part("mag"), "mag", "mG", "mG", scales, fmt=FMT)
         mnt = mag_mounting(cal, FMT, f"COMPASS_ORIENT{_n(compass)}")
         if mnt is not None:  # ArduPilot corrects after rotating: offsets and matrix turn too
             r = mnt.matrix
@@ -249,7 +284,7 @@ def ardupilot_params(
         out.update(_compass(p, compass, compass_scale, float(offsets_max)))
         if mnt is not None:
             out[f"COMPASS_ORIENT{_n(compass)}"] = float(mnt.number)
-    return out
+    return out, prep
 
 
 def ardupilot_parm(cal: Calibration, **kwargs: Any) -> str:
@@ -264,7 +299,7 @@ def ardupilot_parm(cal: Calibration, **kwargs: Any) -> str:
     >>> [ln for ln in text.splitlines() if ln.startswith("COMPASS_OFS_")]
     ['COMPASS_OFS_X,-120', 'COMPASS_OFS_Y,40', 'COMPASS_OFS_Z,-15']
     """
-    params = ardupilot_params(cal, **kwargs)
+    params, prep = _ardupilot(cal, **kwargs)
     head = [
         f"# ArduPilot parameters written by triaxcal {__version__}",
         f"# sensor id: {_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
@@ -273,6 +308,7 @@ def ardupilot_parm(cal: Calibration, **kwargs: Any) -> str:
         "# accel:   (raw - tcal(T) - INS_ACCOFFS) * INS_ACCSCAL          [m/s^2, sensor frame]",
         "# gyro:     raw - tcal(T) - INS_GYROFFS                          [rad/s, sensor frame]",
         "# Gyro offsets are measured again at every boot unless INS_GYR_CAL = 0.",
+        *comment_lines((*mark_lines(prep.invalid), *prep.notes)),
     ]
     lines = [f"{name},{f32(v, name)}" for name, v in params.items()]
     return "\n".join(head + lines) + "\n"

@@ -37,7 +37,7 @@ and Mission Planner reads too.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -57,9 +57,11 @@ from ._params import (
     require_no_gain_poly,
     require_symmetric,
 )
+from ._trust import Prepared, Scales, comment_lines, mark_lines, prepare
 from .ardupilot import _comment
 
-__all__ = ["MAV_PARAM_TYPE_INT32", "MAV_PARAM_TYPE_REAL32", "px4_params", "px4_params_file"]
+__all__ = ["MAV_PARAM_TYPE_INT32", "MAV_PARAM_TYPE_REAL32", "px4_omitted", "px4_params",
+           "px4_params_file"]
 
 FMT = "PX4"
 MAV_PARAM_TYPE_INT32 = 6
@@ -69,10 +71,28 @@ _TC = {"accel": "A", "gyro": "G", "mag": "M"}
 _UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
 
 
-def _device_id(device_ids: Mapping[str, Any] | None, sensor: str) -> int | None:
-    if not device_ids or device_ids.get(sensor) is None:
-        return None
-    v = device_ids[sensor]
+def _device_id(device_ids: Mapping[str, Any] | None, sensor: str,
+               part: Any = None) -> tuple[int | None, str]:
+    """The device id of ``sensor`` and where it came from: ``device_ids`` (the user's), else the
+    log the part was fitted on (``stats["log"]["device_id"]``, or the stored calibration's
+    ``CAL_<S>n_ID``), else None."""
+    if device_ids and device_ids.get(sensor) is not None:
+        return _check_id(device_ids[sensor], sensor), "given"
+    stats = getattr(part, "stats", None) or {}
+    log: Mapping[str, Any] = stats["log"] if isinstance(stats.get("log"), Mapping) else {}
+    v = log.get("device_id") if log.get("format") == "px4-ulog" else None
+    if v is None and isinstance(stats.get("autopilot"), Mapping):
+        ap = stats["autopilot"]
+        if ap.get("autopilot") == "px4" and isinstance(ap.get("params"), Mapping):
+            v = ap["params"].get(f"CAL_{_CAL[sensor]}{ap.get('slot')}_ID")
+            if isinstance(v, float) and v.is_integer():
+                v = int(v)
+    if v is None or v == 0:
+        return None, ""
+    return _check_id(v, sensor), "from the log"
+
+
+def _check_id(v: Any, sensor: str) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 < int(v) < 2**32:
         raise CalibrationError(f"device id of the {sensor} must be a positive 32-bit whole "
                                f"number (the CAL_*_ID value), got {v!r}")
@@ -96,6 +116,8 @@ def px4_params(
     sensors: Iterable[str] | None = None,
     counts_per_unit: Mapping[str, Any] | None = None,
     device_ids: Mapping[str, int] | None = None,
+    sensor_model: str | Sequence[str] | None = None,
+    force: bool = False,
 ) -> list[tuple[str, float, int]]:
     """PX4 parameters ``(name, value, MAV_PARAM_TYPE)`` for the parts of ``cal``.
 
@@ -113,14 +135,37 @@ def px4_params(
         The driver's scale for parts in raw counts.
     device_ids : dict, optional
         Device ids by sensor (``CAL_ACC0_ID`` of the vehicle): written as ``CAL_*n_ID``, and
-        required for thermal terms, which PX4 applies by ``TC_*n_ID``.
+        required for thermal terms, which PX4 applies by ``TC_*n_ID``. Without one, the id the
+        log recorded for the part is used (a part fitted on a PX4 log); with neither,
+        ``CAL_*n_ID`` is not written and :func:`px4_params_file` says so.
+    sensor_model : str or list of str, optional
+        The part(s) whose datasheet scale converts raw counts (see :func:`ardupilot_params`).
+    force : bool
+        Write parts the validity gate refuses; :func:`px4_params_file` marks the file.
+
+    A part fitted on readings PX4 had already corrected is written as the composed absolute
+    calibration, or refused with the reason.
 
     Returns
     -------
     list of (name, value, type)
         ``type`` is ``MAV_PARAM_TYPE_REAL32`` (9) or ``MAV_PARAM_TYPE_INT32`` (6).
     """
+    return _px4(cal, instance=instance, sensors=sensors, counts_per_unit=counts_per_unit,
+                device_ids=device_ids, sensor_model=sensor_model, force=force)[0]
+
+
+def _px4(cal: Calibration, *, instance: int = 0, sensors: Iterable[str] | None = None,
+         counts_per_unit: Mapping[str, Any] | None = None,
+         device_ids: Mapping[str, int] | None = None,
+         sensor_model: str | Sequence[str] | None = None, force: bool = False
+         ) -> tuple[list[tuple[str, float, int]], Prepared, list[str]]:
     chosen = pick_sensors(cal, sensors, ("accel", "gyro", "mag"), FMT)
+    original = cal
+    prep = prepare(cal, chosen, fmt="PX4 parameters", force=force)
+    cal = prep.cal
+    scales = Scales(counts_per_unit, sensor_model)
+    omitted: list[str] = []
     if isinstance(instance, bool) or not isinstance(instance, int) or not 0 <= instance <= 3:
         raise CalibrationError(f"instance must be 0..3 (PX4's calibration slots), got {instance!r}")
     n = instance
@@ -129,10 +174,15 @@ def px4_params(
     for sensor in chosen:
         s, tc = _CAL[sensor], _TC[sensor]
         p: Physical = physical(cal.part(sensor), sensor, _UNITS[sensor], _UNITS[sensor],
-                               counts_per_unit, fmt=FMT)
-        dev = _device_id(device_ids, sensor)
+                               scales, fmt=FMT)
+        dev, _ = _device_id(device_ids, sensor, original.part(sensor))
         if dev is not None:
             out.append((f"CAL_{s}{n}_ID", float(dev), i32))
+        else:
+            omitted.append(
+                f"CAL_{s}{n}_ID not written: the {sensor}'s device id is not known (give it with "
+                f"--device-id {sensor}=ID, the vehicle's CAL_{s}{n}_ID; device_ids= in Python), "
+                f"so these values apply to whichever device the vehicle's CAL_{s}{n}_ID names")
         offset = p.offset
         for i, a in enumerate("XYZ"):
             out.append((f"CAL_{s}{n}_{a}OFF", float(offset[i]), real))
@@ -176,7 +226,7 @@ def px4_params(
         for k in range(4):
             for i in range(3):
                 out.append((f"TC_{tc}{n}_X{k}_{i}", float(poly[k, i]), real))
-    return out
+    return out, prep, omitted
 
 
 def px4_params_file(
@@ -196,7 +246,7 @@ def px4_params_file(
     for name, v in (("system_id", system_id), ("component_id", component_id)):
         if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 255:
             raise CalibrationError(f"{name} must be a MAVLink id 1..255, got {v!r}")
-    params = px4_params(cal, **kwargs)
+    params, prep, omitted = _px4(cal, **kwargs)
     lines = [
         f"# Onboard parameters for Vehicle {system_id}",
         "#",
@@ -204,6 +254,7 @@ def px4_params_file(
         f"{_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
         "# accel = (raw - thermal - CAL_ACCn_OFF) * CAL_ACCn_SCALE; gyro = raw - thermal - "
         "CAL_GYROn_OFF; mag = R S (raw - CAL_MAGn_OFF), R = CAL_MAGn_ROT (external magnetometers)",
+        *comment_lines((*mark_lines(prep.invalid), *prep.notes, *omitted)),
         "#",
         "# Vehicle-Id Component-Id Name Value Type",
     ]
@@ -211,3 +262,9 @@ def px4_params_file(
         text = str(int(value)) if kind == MAV_PARAM_TYPE_INT32 else f32(value, name)
         lines.append(f"{system_id}\t{component_id}\t{name}\t{text}\t{kind}")
     return "\n".join(lines) + "\n"
+
+
+def px4_omitted(cal: Calibration, **kwargs: Any) -> list[str]:
+    """What :func:`px4_params` leaves out for want of information (the device ids it does
+    not know), in words; the same lines :func:`px4_params_file` writes as comments."""
+    return _px4(cal, **kwargs)[2]

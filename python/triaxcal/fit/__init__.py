@@ -34,13 +34,10 @@ from .ellipsoid import (
 )
 from .select import RobustFit, fit_robust
 
+#: The public names (``triaxcal.__all__`` gathers them); ``FIXABLE``, ``MAX_ITER``,
+#: ``METHODS``, ``PARAM_NAMES`` and ``CENTER_METHODS`` stay importable from here.
 __all__ = [
-    "CENTER_METHODS",
-    "FIXABLE",
-    "MAX_ITER",
-    "METHODS",
     "MODELS",
-    "PARAM_NAMES",
     "AutoFit",
     "BatchFit",
     "Descent",

@@ -29,6 +29,7 @@ from .._checks.arrays import (
     as_vector,
     require_radius,
 )
+from ..conventions.names import PARAM_NAMES as _PARAM_NAMES
 from ..errors import CalibrationError
 
 __all__ = [
@@ -52,13 +53,9 @@ __all__ = [
 MODELS = ("sphere", "axis", "full")
 METHODS = ("lm", "gn", "algebraic")
 
-#: Names of the parameters whose standard errors ``EllipsoidFit.stderr`` holds, per model.
-PARAM_NAMES = {
-    "sphere": ("offset_x", "offset_y", "offset_z", "data_radius"),
-    "axis": ("offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z"),
-    "full": ("offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
-             "offdiag_xy", "offdiag_xz", "offdiag_yz"),
-}
+#: Names of the parameters whose standard errors ``EllipsoidFit.stderr`` holds, per model
+#: (kept in :mod:`triaxcal.conventions.names`; the compiled core reads them from this module).
+PARAM_NAMES = _PARAM_NAMES
 
 #: Most refinement steps a fit accepts (each is a pass over the points; fits take tens).
 MAX_ITER = 1_000_000

@@ -63,6 +63,7 @@ import numpy as np
 from ..calibration.file import Calibration
 from ..calibration.part import SensorCalibration
 from ..calibration.request import FitRequest, SourceOptions
+from ..conventions.names import COEFFICIENTS
 from ..errors import CalibrationError
 from ..quality.coverage import coverage
 
@@ -283,7 +284,7 @@ def judge(
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
-    from ..calibration.gate import check, judged
+    from ..calibration.gate import check_part, judged
     from ..calibration.session import fit_session
     from ..io.tables import pick_columns
 
@@ -301,10 +302,10 @@ def judge(
     part = None
     try:
         outcome = fit_session(table, request)
-        verdict = check(outcome.part, request.sensor)
-        if not verdict.valid:
-            fails.append(("not_a_calibration", verdict.text("the fit")))
-        part = judged(outcome.part, verdict, force=True)
+        gate = check_part(outcome.part, request.sensor)
+        if not gate.valid:
+            fails.append(("not_a_calibration", gate.text("the fit")))
+        part = judged(outcome.part, gate, force=True)
     except CalibrationError as exc:
         # name the cause when it is a too narrow set of directions
         pts = raw
@@ -595,10 +596,8 @@ def batch_fit(
 
 #: Columns of ``summary.csv``, one row per board.
 SUMMARY_COLUMNS = (
-    "id", "verdict", "reasons", "message", "model", "raw_unit", "unit",
-    "offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
-    "offdiag_xy", "offdiag_xz", "offdiag_yz", "radius", "rms", "rms_pct", "coverage_pct",
-    "points", "noise", "cross_axis", "source",
+    "id", "verdict", "reasons", "message", "model", "raw_unit", "unit", *COEFFICIENTS,
+    "radius", "rms", "rms_pct", "coverage_pct", "points", "noise", "cross_axis", "source",
 )
 
 

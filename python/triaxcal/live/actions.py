@@ -14,6 +14,13 @@
   decoder drops the frame they interrupt (it is counted like any damaged frame); polled binary
   cannot carry them (the next request clears the input), so Send needs a streaming protocol.
 
+Export and Send refuse a calibration the validity gate refuses (as ``triaxcal export`` and
+``send`` do; Save writes only what passes it), and say why, unless ``force``; a forced header
+says it is not valid. Send needs the board driver's scale: the live options'
+``counts_per_unit`` / ``sensor_model`` (``capture --live --counts-per-unit ...``), or the fixed
+scale of MotionCal's ``Raw:`` lines (:data:`triaxcal.io.protocol.RAW_SCALES`); without either
+it is refused, naming what is missing.
+
 After a Reset, Save fits only the rows captured since: they are first copied, header and all,
 to ``<session>.after-reset-<k>.csv`` next to the session, which is then the file fitted (so
 ``triaxcal fit`` on that file gives the same calibration).
@@ -100,8 +107,9 @@ def save(state: LiveState) -> dict[str, Any]:
     return _run(state, "save", go)
 
 
-def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
-    """Export C header: Save, then ``triaxcal export calibration.json --format FMT``."""
+def export_header(state: LiveState, fmt: str, *, force: bool = False) -> dict[str, Any]:
+    """Export C header: Save, then ``triaxcal export calibration.json --format FMT`` (with
+    ``force``: ``--force``)."""
     from ..export import export
     from ..export._cgen import _ident
 
@@ -115,15 +123,46 @@ def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
         name = f"{prefix}_calibration.h" if fmt == "c" else f"{prefix}_calibration_fixed.h"
         out = state.out_dir / name
         try:
-            export(cal, fmt, out, prefix=prefix)
+            export(cal, fmt, out, prefix=prefix, force=force)
         except CalibrationError as exc:
             raise CalibrationError(f"{msg}; but the export failed: {exc}") from None
-        return {"message": f"{msg}; wrote {out}", "path": str(out)}
+        note = "" if not force or not _invalid(cal) else (
+            " -- NOT A VALID CALIBRATION, written because forced: " + _invalid(cal))
+        return {"message": f"{msg}; wrote {out}{note}", "path": str(out)}
 
     return _run(state, f"export-{fmt}", go)
 
 
-def send(state: LiveState, *, offsets_only: bool = False) -> dict[str, Any]:
+def _invalid(cal: Calibration) -> str:
+    """The gate's reasons against the parts of ``cal``, in words ("" when all pass)."""
+    from ..calibration.gate import require_valid
+
+    out = []
+    for s in cal.sensors:
+        v = require_valid(cal.part(s), s, force=True)
+        if not v.valid:
+            out.append(f"{s}: " + "; ".join(v.reasons))
+    return " | ".join(out)
+
+
+def _scales(state: LiveState) -> dict[str, Any]:
+    """The driver's scale for Send: the live options', else the ``Raw:`` format's own."""
+    opts = state.options
+    cpu = getattr(opts, "counts_per_unit", None)
+    models = tuple(getattr(opts, "sensor_model", ()) or ())
+    if cpu or models:
+        return {"counts_per_unit": cpu, "sensor_model": list(models) or None}
+    if state.protocol == "raw":
+        from ..io.protocol import RAW_SCALES
+
+        return {"counts_per_unit": {"accel": (RAW_SCALES["accel"], "g"),
+                                    "gyro": (RAW_SCALES["gyro"], "deg/s"),
+                                    "mag": (RAW_SCALES["mag"], "uT")}}
+    return {}
+
+
+def send(state: LiveState, *, offsets_only: bool = False,
+         force: bool = False) -> dict[str, Any]:
     """Send to board: Save, then the MotionCal packet over the open port, with the echo check
     of ``triaxcal send``. The packet carries the accelerometer's and gyroscope's offsets but
     not their gains: as ``triaxcal send`` does, such a calibration is refused (the answer has
@@ -141,13 +180,24 @@ def send(state: LiveState, *, offsets_only: bool = False) -> dict[str, Any]:
                 "polled binary cannot carry the board's echo while capturing: stop the capture "
                 "(Ctrl-C), then `triaxcal send calibration.json --port PORT`")
         cal, cal_path, msg = _save(state)
-        losses = motioncal_losses(cal)
+        from ..export._trust import prepare
+
+        try:
+            prepare(cal, fmt="a MotionCal packet", force=force, action="send")
+            scales = _scales(state)
+            losses = motioncal_losses(cal, **scales)
+        except CalibrationError as exc:
+            raise CalibrationError(
+                f"{msg}; not sent: {exc}"
+                + (" (start the capture with --counts-per-unit or --sensor-model; "
+                   "LiveOptions(counts_per_unit=...))" if "guess the driver" in str(exc)
+                   else "")) from None
         if losses and not offsets_only:
             raise _NeedsOffsetsOnly(
                 f"{msg}; not sent: the MotionCal packet cannot carry " + "; ".join(losses)
                 + ". Send the offsets only (as `triaxcal send --offsets-only`), or export a C "
                 "header, which carries everything")
-        packet = motioncal_packet(cal, offsets_only=offsets_only)
+        packet = motioncal_packet(cal, offsets_only=offsets_only, force=force, **scales)
         state._echo = bytearray()
         try:
             reader.write(packet)

@@ -43,7 +43,8 @@ def fit_request(state: FitSource, sensor: str) -> FitRequest:
     """The request Save fits ``sensor`` with: the accelerometer's still poses to the page's
     accelerometer radius, the magnetometer on every row (to its radius, or its own scale)."""
     o = state.options
-    common: dict[str, Any] = {"model": o.model, "sigma": o.sigma, "rounds": o.rounds}
+    common: dict[str, Any] = {"model": o.model, "outliers": o.outliers, "sigma": o.sigma,
+                              "rounds": o.rounds}
     if sensor == "accel":
         return FitRequest(sensor="accel", radius=o.accel_radius, **common,
                           source=SourceOptions(poses=True, detection=state.detection))
@@ -82,6 +83,8 @@ def fit_argv(request: FitRequest, session: str, output: str, *, new: bool) -> li
     argv = ["fit", session, "--sensor", request.sensor]
     if request.model != d.model:
         argv += ["--model", request.model]
+    if request.outliers != d.outliers:
+        argv += ["--outliers", request.outliers]
     if request.sigma != d.sigma:
         argv += ["--sigma", repr(float(request.sigma))]
     if request.rounds != d.rounds:

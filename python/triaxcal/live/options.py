@@ -52,8 +52,8 @@ class LiveOptions:
     """How the live page fits, and where its buttons write.
 
     The fit options are ``triaxcal fit``'s, with its defaults: ``model`` (``"auto"``: by BIC),
-    ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius`` (as
-    ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
+    ``outliers``, ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius``
+    (as ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
     ``detection`` (the pose detection of ``capture`` and ``fit --poses``,
     :class:`~triaxcal.detect.session.PoseSettings`; ``None``: the command line's defaults).
     ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
@@ -61,9 +61,14 @@ class LiveOptions:
     buffer of well-spread samples; ``refresh_hz`` how often the background thread refits and
     publishes. ``out_dir`` (default: the session's folder) receives ``calibration.json`` and
     the C headers, named with ``prefix``; ``send_timeout_s`` bounds the wait for a board's echo.
+    ``counts_per_unit`` (``{"accel": (16384, "g")}``) and ``sensor_model`` (part names such as
+    ``"MPU-6050:2g,250dps"``) give the board driver's scale for Send (the MotionCal packet is
+    in m/s^2, rad/s and uT); without them only ``Raw:`` lines, whose format fixes the scale,
+    can be sent.
     """
 
     model: str = "auto"
+    outliers: str = "robust"
     sigma: float = 2.0
     rounds: int = 10
     accel_radius: str = "1g"
@@ -75,6 +80,8 @@ class LiveOptions:
     out_dir: Path | None = None
     prefix: str = "triaxcal"
     send_timeout_s: float = 3.0
+    counts_per_unit: Any = None
+    sensor_model: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         from ..calibration.request import parse_radius
@@ -82,6 +89,11 @@ class LiveOptions:
 
         if self.model not in (*MODELS, "auto"):
             raise CalibrationError(f"model must be one of {(*MODELS, 'auto')}, got {self.model!r}")
+        from ..calibration.request import OUTLIER_RULES
+
+        if self.outliers not in OUTLIER_RULES:
+            raise CalibrationError(f"outliers must be one of {OUTLIER_RULES}, got "
+                                   f"{self.outliers!r}")
         if not (isinstance(self.sigma, (int, float)) and self.sigma >= 0):
             raise CalibrationError(f"sigma must be >= 0, got {self.sigma!r}")
         for name, lo in (("rounds", 0), ("mag_buffer", 50)):
@@ -102,6 +114,11 @@ class LiveOptions:
         if not (isinstance(self.send_timeout_s, (int, float)) and self.send_timeout_s > 0):
             raise CalibrationError(f"send_timeout_s must be > 0, got {self.send_timeout_s!r}")
         _ident(self.prefix)
+        from ..export._trust import Scales
+
+        if isinstance(self.sensor_model, str):
+            object.__setattr__(self, "sensor_model", (self.sensor_model,))
+        Scales(self.counts_per_unit, tuple(self.sensor_model))  # checked now, not at Send
 
 
 def _jsonable(obj: Any) -> Any:

@@ -12,7 +12,7 @@ The capture loop (:func:`triaxcal.capture.run.capture`) hands every batch of rec
 
 A background thread (:meth:`LiveState.start`) refits several times a second what has arrived
 with the same Rust fits and options as ``triaxcal fit`` (:func:`triaxcal.fit.select.fit_robust`:
-model choice by BIC, 2-sigma outlier rejection) and publishes one JSON document
+model choice by BIC, the default outlier rule) and publishes one JSON document
 (:meth:`LiveState.document`, served as ``GET /api/state``) and the thinned point sets
 (:meth:`LiveState.points`). Nothing grows with the length of the capture except one small
 record per registered pose. When the capture ends, :meth:`LiveState.finish` fits the saved
@@ -263,7 +263,8 @@ class LiveState:
         o = self.options
         radius = self.accel_radius if sensor == "accel" else self.mag_radius
         unit = self.accel_unit if sensor == "accel" else self.mag_unit
-        rob = fit_robust(pts, model=o.model, radius=radius, sigma=o.sigma,
+        rule = "sigma" if o.outliers == "magneto" else o.outliers
+        rob = fit_robust(pts, model=o.model, radius=radius, rule=rule, sigma=o.sigma,
                          max_rounds=o.rounds, lengths="calibrated")
         f = rob.fit
         return _Fit(model=f.model, offset=np.array(f.offset), matrix=np.array(f.matrix),
@@ -479,7 +480,8 @@ class LiveState:
             "actions": {"last": self.last_action,
                         "send_possible": self._reader is not None and not getattr(
                             self._reader, "polled", False) and self.status == "capturing"},
-            "options": {"model": self.options.model, "sigma": self.options.sigma,
+            "options": {"model": self.options.model, "outliers": self.options.outliers,
+                        "sigma": self.options.sigma,
                         "rounds": self.options.rounds, "accel_radius": self.options.accel_radius,
                         "mag_radius": self.options.mag_radius,
                         "detection": self.detection.to_dict(),

@@ -53,7 +53,6 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from ..calibration.part import SensorCalibration, TemperatureTerms
 from ..errors import CalibrationError
 
 __all__ = [
@@ -310,29 +309,6 @@ class AutoCalibration:
                                 (len(a), 1))
             off = off + (t - self.temp_ref_c) * self.temp_coef
         return (a - off) * self.gain
-
-    def to_sensor_calibration(self, *, source: str | None = None) -> SensorCalibration:
-        """The correction as a :class:`~triaxcal.SensorCalibration` (g -> g, ``matrix =
-        diag(gain)``, temperature terms in ``offset_poly``), for files and exports."""
-        temp = None
-        if self.temp_ref_c is not None and self.temp_range_c is not None:
-            temp = TemperatureTerms(temp_ref_c=self.temp_ref_c, temp_range_c=self.temp_range_c,
-                                    offset_poly=np.vstack([np.zeros(3), self.temp_coef]))
-        stats = {
-            "method": "van Hees et al. 2014 (free-living, still 10 s windows)",
-            "accepted": self.accepted,
-            "status": self.status,
-            "error_before_g": self.error_before_g,
-            "error_after_g": self.error_after_g,
-            "n_windows": self.n_windows,
-            "n_still": self.n_still,
-            "hours": self.hours,
-            "iterations": self.iterations,
-            "settings": self.settings,
-        }
-        return SensorCalibration(offset=self.offset, matrix=np.diag(self.gain), raw_unit="g",
-                                 unit="g", radius=1.0, model="autocal-vanhees",
-                                 temperature=temp, stats=stats, source=source)
 
     def __repr__(self) -> str:
         off = ", ".join(f"{1000 * v:+.2f}" for v in self.offset)

@@ -13,15 +13,7 @@ from .quality import (
     have_matplotlib,
     quality_report,
 )
+from .text import coefficient_table
 
-__all__ = [
-    "QualityReport",
-    "cap_words",
-    "context_lines",
-    "direction_words",
-    "empty_regions",
-    "have_matplotlib",
-    "plot_report",
-    "quality_report",
-    "report_figure",
-]
+#: The public names (``triaxcal.__all__`` gathers them).
+__all__ = ["QualityReport", "coefficient_table", "plot_report", "quality_report"]

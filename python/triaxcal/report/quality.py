@@ -39,6 +39,7 @@ from ..conventions.units import per_unit
 from ..errors import CalibrationError
 from ..quality.caps import largest_empty_caps
 from ..quality.coverage import Coverage, coverage, coverage_warning
+from .text import coefficient_table, printable
 
 __all__ = [
     "QualityReport",
@@ -236,10 +237,12 @@ class QualityReport:
         ]
         if self.model_reason:
             lines.append(f"  model choice    {self.model_reason}")
+        lines += ["  " + r for r in self.extra.get("coefficients", [])]
         lines += self.extra.get("context", [])
         ci = (self.intervals or {}).get("coefficients") or {}
         if self.stderr:
-            lines.append("  standard errors" + (
+            lines.append("  standard errors (1 sigma: how uncertain each coefficient is, not its "
+                         "value)" + (
                 f" and {round(100 * self.intervals['level'])} % bootstrap intervals "
                 f"({self.intervals['n_boot']} refits over {self.intervals['resample']})"
                 if ci and self.intervals else ""))
@@ -251,7 +254,7 @@ class QualityReport:
                     f"   [{c['lower']:.6g}, {c['upper']:.6g}]"
                     + ("  <- wider than firmware needs" if (c["upper"] - c["lower"]) / 2
                        > c["tolerance"] else ""))
-                lines.append(f"    {k:<12} {v:.3g} {unit}{band}")
+                lines.append(f"    {k:<12} +-{v:.3g} {unit}{band}")
         if self.rejected:
             shown = ", ".join(str(i) for i in self.rejected[:30])
             more = f", ... ({len(self.rejected)} in all)" if len(self.rejected) > 30 else ""
@@ -260,7 +263,7 @@ class QualityReport:
             lines.append("  outliers        none rejected")
         if self.warnings:
             lines.append("  warnings")
-            lines += [f"    - {w}" for w in self.warnings]
+            lines += [f"    - {printable(w)}" for w in self.warnings]
         else:
             lines.append("  warnings        none: this calibration looks good")
         return "\n".join(lines)
@@ -386,7 +389,8 @@ def quality_report(
         warnings=warnings,
         model_reason=model_reason or part.stats.get("model_reason"),
         intervals=intervals,
-        extra={"context": context_lines(part)},
+        extra={"context": context_lines(part),
+               "coefficients": coefficient_table(part, sensor or "sensor")},
     )
 
 

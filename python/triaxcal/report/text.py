@@ -14,12 +14,27 @@ import numpy as np
 from ..calibration.part import SensorCalibration
 from ..conventions.units import per_unit
 
-__all__ = ["SUMMARY_METHODS", "SUMMARY_MODELS", "coefficient_table", "fit_lines",
+__all__ = ["SUMMARY_METHODS", "SUMMARY_MODELS", "coefficient_table", "fit_lines", "printable",
            "stderr_lines", "stored_text", "summary_only", "summary_text"]
 
 #: Parts whose readings do not lie on a sphere: reported by their stored numbers.
 SUMMARY_METHODS = ("gyro-gains", "temperature")
 SUMMARY_MODELS = ("bias",)
+
+
+def printable(text: Any, limit: int = 2000) -> str:
+    """``text`` safe for a terminal: control characters (ESC, BEL, CR, CSI ...) shown as
+    ``\\xNN`` escapes, and at most ``limit`` characters -- for text that came from a file.
+
+    >>> printable("ok\\x1b[2Jgone\\a")
+    'ok\\\\x1b[2Jgone\\\\x07'
+    """
+    import unicodedata
+
+    s = str(text)
+    out = "".join(c if c in " \t" or unicodedata.category(c)[0] not in "CZ"
+                  else c.encode("unicode_escape").decode("ascii") for c in s[:limit])
+    return out + ("..." if len(s) > limit else "")
 
 
 def _num(v: float) -> str:
@@ -122,11 +137,11 @@ def fit_lines(saved: Any) -> list[str]:
     if saved.alignment_text:
         lines.append("  " + saved.alignment_text.replace("\n", "\n  "))
     for w in s.get("warnings", []):
-        lines.append(f"  warning: {w}")
+        lines.append(f"  warning: {printable(w)}")
     if out.source is not None and out.source.recording is not None:
         lines += autopilot_lines(out.source, out.sensor, part.offset, part.matrix, part.unit)
         for w in out.source.recording.meta.get("warnings", []):
-            lines.append(f"  warning: {w}")
+            lines.append(f"  warning: {printable(w)}")
     return lines
 
 
@@ -180,7 +195,7 @@ def summary_text(sensor: str, part: SensorCalibration) -> str:
         lines.append(f"  samples         {s['n_samples']}")
     if s.get("warnings"):
         lines.append("  warnings")
-        lines += [f"    - {w}" for w in s["warnings"]]
+        lines += [f"    - {printable(w)}" for w in s["warnings"]]
     return "\n".join(lines)
 
 
@@ -206,5 +221,5 @@ def stored_text(sensor: str, part: SensorCalibration,
         lines.append(f"  outliers        {len(s['rejected'])} rejected")
     lines += context_lines(part)
     for w in s.get("warnings", []):
-        lines.append(f"    - {w}")
+        lines.append(f"    - {printable(w)}")
     return "\n".join(lines)
