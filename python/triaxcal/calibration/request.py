@@ -43,6 +43,7 @@ from ..errors import CalibrationError
 from ..fit.ellipsoid import MODELS
 
 __all__ = [
+    "FIT_METHODS",
     "MAX_BOOTSTRAP",
     "OUTLIER_RULES",
     "REJECTION_RULES",
@@ -55,6 +56,11 @@ __all__ = [
 #: Most bootstrap refits a request may ask for (each is a full fit; 10,000 resamples give
 #: 95 % intervals to well under a percent of their width).
 MAX_BOOTSTRAP = 10_000
+
+#: How a session is fitted: ``"ellipsoid"`` (the readings alone) or ``"attitude"`` (a flight
+#: log's compass against the Earth's field turned by the logged attitude,
+#: :mod:`triaxcal.calibration.flight`).
+FIT_METHODS = ("ellipsoid", "attitude")
 
 #: Most reject-and-refit rounds.
 MAX_ROUNDS = 1000
@@ -295,6 +301,10 @@ class FitRequest:
         Parameters held at a value instead of fitted (``--fix NAME=VALUE``).
     source : SourceOptions
     field : FieldOptions
+    method : {"ellipsoid", "attitude"}
+        ``"attitude"`` fits a flight log's compass to the Earth's field turned by the logged
+        attitude, with battery-current or throttle interference (``--method``;
+        :mod:`triaxcal.calibration.flight`).
     """
 
     sensor: str = "accel"
@@ -311,6 +321,7 @@ class FitRequest:
     fixed: Mapping[str, float] = _field(default_factory=dict)
     source: SourceOptions = _field(default_factory=SourceOptions)
     field: FieldOptions = _field(default_factory=FieldOptions)
+    method: str = "ellipsoid"
 
     def __post_init__(self) -> None:
         if self.sensor not in SENSORS:
@@ -389,6 +400,20 @@ class FitRequest:
         if f.align and self.source.poses:
             raise CalibrationError(f"{opt('align')} finds the still poses itself: drop "
                                    f"{opt('poses')}")
+        if self.method not in FIT_METHODS:
+            raise CalibrationError(f"{opt('method')} must be one of {', '.join(FIT_METHODS)}, got "
+                                   f"{str(self.method)[:32]!r}")
+        if self.method == "attitude":
+            if not mag:
+                raise CalibrationError(f"{opt('method', 'attitude')} calibrates the compass: it "
+                                       f"needs {opt('sensor', 'mag')}, not {self.sensor}")
+            for flag, name in ((f.yaw_only, "yaw_only"), (f.align, "align"),
+                               (self.source.poses, "poses"), (self.asa is not None, "asa"),
+                               (bool(self.bootstrap), "bootstrap"), (bool(self.fixed), "fixed"),
+                               (self.radius is not None, "radius")):
+                if flag:
+                    raise CalibrationError(f"{opt('method', 'attitude')} does not take "
+                                           f"{opt(name)}: drop it")
         if self.bootstrap and self.asa is not None:
             raise CalibrationError(f"{opt('bootstrap')} with {opt('asa')} is not supported: the "
                                    "intervals would describe the ASA-adjusted coefficients")

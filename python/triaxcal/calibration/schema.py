@@ -69,6 +69,7 @@ KNOWN_MODELS = (
     "yaw",
     "autocal-vanhees",  # free-living auto-calibration (triaxcal.autocalibrate)
     "factory",  # a maker's calibration read from a file header (GENEActiv)
+    "attitude",  # compass fitted to the Earth's field turned by a flight's attitude
 )
 
 
@@ -134,7 +135,28 @@ STATS_FIELDS: dict[str, Field] = {
     "rejection_rounds": Field(integer),
     "model_reason": Field(optional(text(MAX_TEXT, plain=False))),
     "forced": Field(boolean),
+    "interference": Field(lambda v, w: _interference(v, w)),
+    "undetermined": Field(list_of(text(MAX_TEXT, plain=False), max_items=64)),
 }
+
+
+def _interference(value: Any, what: str) -> dict[str, Any]:
+    """``{"per": "A" | "throttle", "vector": [x, y, z], "unit": ..., "source": ...}``: the
+    field (in ``unit``, calibrated frame) ADDED after the matrix per ampere of battery current
+    or per unit of throttle (0..1), as ArduPilot's COMPASS_MOT (triaxcal.methods.attitude)."""
+    return check_fields(value, {
+        "per": Field(lambda v, w: _per(v, w), required=True),
+        "vector": Field(lambda v, w: vec3(v, w).tolist(), required=True),
+        "unit": Field(UNIT_TEXT, required=True),
+        "source": Field(optional(text(128))),
+    }, what)
+
+
+def _per(value: Any, what: str) -> str:
+    v = text(16)(value, what)
+    if v not in ("A", "throttle"):
+        raise CalibrationError(f"{what} must be 'A' or 'throttle', got {_short(v)}")
+    return v
 
 
 def stats_object(value: Any, what: str) -> dict[str, Any]:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..conventions.units import UNITS, unit_factor
+from ..errors import CalibrationError
 from ..io.akm import apply_asa
 from ..io.tables import Table
 from ..methods.field import ExpectedField
@@ -77,6 +78,17 @@ def fit_session(
     req = request if request is not None else FitRequest()
     sensor = req.sensor
     notes: list[str] = []
+    if req.method == "attitude":
+        from .flight import fit_flight
+
+        if isinstance(data, Table):
+            raise CalibrationError("--method attitude needs a flight log (.bin, .ulg) with the "
+                                   "vehicle's attitude, not a table")
+        part, fsrc = fit_flight(data, req)
+        return FitOutcome(part=part, points=fsrc.raw, sensor=sensor,
+                          rejected=np.asarray(part.stats.get("rejected", []), dtype=np.int64),
+                          reason=None, table=None, source=None, notes=notes,
+                          expected=part.expected_field)
     expected = expected_for(req)
     src = table_source(data, sensor, req.source) if isinstance(data, Table) else load_source(
         data, sensor, req.source)

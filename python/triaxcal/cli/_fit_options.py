@@ -8,6 +8,7 @@ import math
 from typing import Any
 
 from ..calibration.request import (
+    FIT_METHODS,
     MAX_BOOTSTRAP,
     OUTLIER_RULES,
     FieldOptions,
@@ -98,6 +99,12 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     """The options of ``fit`` that ``report`` and ``batch`` also take."""
     p.add_argument("--sensor", choices=SENSORS, default=None,
                    help="which sensor the columns hold (default: accel)")
+    p.add_argument("--method", choices=FIT_METHODS, default=_DEFAULT.method,
+                   help="ellipsoid: fit the readings alone (default); attitude: a flight log's "
+                        "compass against the Earth's field turned by the logged attitude (ATT, "
+                        "vehicle_attitude), with battery-current or throttle interference "
+                        "(COMPASS_MOT); the field from the log's GPS / EKF origin or --location, "
+                        "else fitted")
     p.add_argument("--columns", default=None,
                    help="three columns by name or zero-based index: ax,ay,az or 0,1,2 "
                         "(default: the sensor's named columns, or the first three)")
@@ -218,6 +225,7 @@ def fit_request(args: Any, **overrides: Any) -> FitRequest:
         reject_on=args.reject_on,
         asa=args.asa, bootstrap=getattr(args, "bootstrap", 0),
         fixed=parse_fix(getattr(args, "fix", None)), source=source, field=field,
+        method=getattr(args, "method", None) or _DEFAULT.method,
     )
     kw.update(overrides)
     return FitRequest(**kw)

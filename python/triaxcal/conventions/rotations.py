@@ -22,8 +22,8 @@ import numpy as np
 
 from ..errors import CalibrationError
 
-__all__ = ["MAX_MOUNTING_DEG", "MOUNTINGS", "Mounting", "mounting", "nearest_mounting",
-           "rotation_angle_deg"]
+__all__ = ["MAX_MOUNTING_DEG", "MOUNTINGS", "Mounting", "euler_to_dcm", "mounting",
+           "nearest_mounting", "quat_to_dcm", "rotation_angle_deg"]
 
 
 def _axis_rot(axis: int, deg: int) -> np.ndarray:
@@ -112,3 +112,46 @@ def nearest_mounting(rotation: Any) -> tuple[Mounting, float]:
 
 #: A rotation is named as a right-angle mounting only within this angle of it (deg).
 MAX_MOUNTING_DEG = 20.0
+
+
+def euler_to_dcm(roll_deg: Any, pitch_deg: Any, yaw_deg: Any) -> np.ndarray:
+    """Body-to-NED rotation matrices ``Rz(yaw) Ry(pitch) Rx(roll)`` (N, 3, 3) from Euler angles
+    in degrees (ArduPilot ``ATT.Roll/Pitch/Yaw``; pymavlink ``mavextra.rotation_df``).
+
+    >>> np.round(euler_to_dcm([0.0], [0.0], [90.0])[0] @ [1.0, 0.0, 0.0], 6).tolist()
+    [0.0, 1.0, 0.0]
+    """
+    r, p, y = (np.radians(np.asarray(a, float).ravel()) for a in (roll_deg, pitch_deg, yaw_deg))
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    out = np.empty((len(r), 3, 3))
+    out[:, 0, 0] = cp * cy
+    out[:, 0, 1] = sr * sp * cy - cr * sy
+    out[:, 0, 2] = cr * sp * cy + sr * sy
+    out[:, 1, 0] = cp * sy
+    out[:, 1, 1] = sr * sp * sy + cr * cy
+    out[:, 1, 2] = cr * sp * sy - sr * cy
+    out[:, 2, 0] = -sp
+    out[:, 2, 1] = sr * cp
+    out[:, 2, 2] = cr * cp
+    return out
+
+
+def quat_to_dcm(q: Any) -> np.ndarray:
+    """Body-to-NED rotation matrices (N, 3, 3) from unit quaternions ``(w, x, y, z)`` (PX4
+    ``vehicle_attitude.q``, Hamilton convention, ``matrix::Dcm(Quaternion)``)."""
+    q = np.asarray(q, float).reshape(-1, 4)
+    n = np.linalg.norm(q, axis=1, keepdims=True)
+    if not np.all(n > 0):
+        raise CalibrationError("attitude quaternions must not be zero")
+    w, x, y, z = (q / n).T
+    out = np.empty((len(q), 3, 3))
+    out[:, 0, 0] = 1 - 2 * (y * y + z * z)
+    out[:, 0, 1] = 2 * (x * y - w * z)
+    out[:, 0, 2] = 2 * (x * z + w * y)
+    out[:, 1, 0] = 2 * (x * y + w * z)
+    out[:, 1, 1] = 1 - 2 * (x * x + z * z)
+    out[:, 1, 2] = 2 * (y * z - w * x)
+    out[:, 2, 0] = 2 * (x * z - w * y)
+    out[:, 2, 1] = 2 * (y * z + w * x)
+    out[:, 2, 2] = 1 - 2 * (x * x + y * y)
+    return out

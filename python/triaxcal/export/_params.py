@@ -24,7 +24,7 @@ from ..conventions.units import per_unit, unit_factor
 from ..errors import CalibrationError
 from ._trust import Scales
 
-__all__ = ["Physical", "f32", "physical", "pick_sensors"]
+__all__ = ["Physical", "f32", "interference", "physical", "pick_sensors"]
 
 _FLOAT32_MAX = 3.4028234663852886e38
 
@@ -90,6 +90,19 @@ def physical(part: SensorCalibration, sensor: str, raw_unit: str, unit: str,
         scale_source=source,
         composed=bool(part.stats.get("composed_with_autopilot")),
     )
+
+
+def interference(part: SensorCalibration) -> tuple[str, np.ndarray] | None:
+    """A part's interference term: ``(per, vector)`` -- ``per`` ``"A"`` (battery current) or
+    ``"throttle"`` (0..1), ``vector`` the field in ``part.unit`` ADDED after the matrix per unit
+    of it (:mod:`triaxcal.methods.attitude`) -- or None."""
+    inter = part.stats.get("interference")
+    if not isinstance(inter, dict):
+        return None
+    if inter.get("unit") != part.unit:
+        raise CalibrationError(f"the interference term is in {inter.get('unit')!r} but the part "
+                               f"is in {part.unit!r}: the file was edited; fit again")
+    return str(inter["per"]), np.asarray(inter["vector"], dtype=float)
 
 
 def _factor(src: str, dst: str, sensor: str, fmt: str, what: str) -> float:

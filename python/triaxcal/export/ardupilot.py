@@ -56,11 +56,18 @@ import numpy as np
 
 from .._core import __version__
 from ..calibration.file import Calibration
+from ..conventions.autopilot import (
+    AP_MOTCT_CURRENT,
+    AP_MOTCT_THROTTLE,
+    ardupilot_names,
+)
 from ..errors import CalibrationError
 from ._params import (
     Physical,
+    _factor,
     check_range,
     f32,
+    interference,
     mag_mounting,
     physical,
     pick_sensors,
@@ -80,16 +87,13 @@ TEMP_REFERENCE_C = 35.0  # AP_InertialSensor_tempcal.cpp TEMP_REFERENCE
 TCAL_SCALE = 1.0e6  # AP_InertialSensor_tempcal.cpp SCALE_FACTOR
 
 
-def _n(index: int) -> str:
-    return "" if index == 0 else str(index + 1)
-
-
 def _compass(p: Physical, index: int, scale_mode: Any, offsets_max: float) -> dict[str, float]:
     require_symmetric(p, FMT)
     if p.offset_poly is not None:
         raise CalibrationError("ArduPilot applies no temperature correction to the compass; "
                                "this calibration's magnetometer has temperature terms")
-    n = _n(index)
+    names = ardupilot_names("mag", index)
+    ofs, dia, odi, sc = names["offset"], names["dia"], names["odi"], names["scale"]
     m = p.matrix
     det = float(np.linalg.det(m))
     if det <= 0:
@@ -102,7 +106,7 @@ def _compass(p: Physical, index: int, scale_mode: Any, offsets_max: float) -> di
         scale = 0.0
     else:
         scale = float(scale_mode)
-        check_range(scale, 0.85, 1.3, f"COMPASS_SCALE{n}",
+        check_range(scale, 0.85, 1.3, sc,
                     "ArduPilot ignores COMPASS_SCALE outside 0.85..1.4 (Compass::"
                     "have_scale_factor) and documents 0..1.3")
     shape = m / scale if scale else m
@@ -116,28 +120,49 @@ def _compass(p: Physical, index: int, scale_mode: Any, offsets_max: float) -> di
         why = ("the hard iron is larger than ArduPilot accepts: a magnet or steel next to the "
                "compass; move the compass away from it (or raise COMPASS_OFFS_MAX, offsets_max=)")
     for i, a in enumerate("XYZ"):
-        out[f"COMPASS_OFS{n}_{a}"] = check_range(
-            -float(p.offset[i]), -offsets_max, offsets_max, f"COMPASS_OFS{n}_{a}",
+        out[f"{ofs}{a}"] = check_range(
+            -float(p.offset[i]), -offsets_max, offsets_max, f"{ofs}{a}",
             f"ArduPilot refuses compass offsets beyond COMPASS_OFFS_MAX ({offsets_max:g} mG; "
             f"default 1800, at most 3000); {why}")
     for i, a in enumerate("XYZ"):
-        out[f"COMPASS_DIA{n}_{a}"] = check_range(
-            float(shape[i, i]), 0.2, 5.0, f"COMPASS_DIA{n}_{a}",
+        out[f"{dia}{a}"] = check_range(
+            float(shape[i, i]), 0.2, 5.0, f"{dia}{a}",
             "ArduPilot accepts soft-iron diagonals only within 0.2..5 "
             "(CompassCalibrator::fit_acceptable)" + ("" if p.scale_source is None else
                                                      f"; the scale used: {p.scale_source}"))
     for (i, j), a in zip(((0, 1), (0, 2), (1, 2)), "XYZ"):
         v = float(shape[i, j])
         if not abs(v) < 1.0:
-            raise CalibrationError(f"COMPASS_ODI{n}_{a} = {v:.6g}: ArduPilot accepts soft-iron "
+            raise CalibrationError(f"{odi}{a} = {v:.6g}: ArduPilot accepts soft-iron "
                                    "off-diagonals only within (-1, 1) "
                                    "(CompassCalibrator::fit_acceptable)")
-        out[f"COMPASS_ODI{n}_{a}"] = v
-    out[f"COMPASS_SCALE{n}"] = scale
+        out[f"{odi}{a}"] = v
+    out[sc] = scale
     if p.radius is not None:
         check_range(p.radius, 150.0, 950.0, "the calibrated field strength (mG)",
                     "ArduPilot's calibrator accepts fields of 150..950 mG only "
                     "(CompassCalibrator::fit_acceptable); check the calibration's units")
+    return out
+
+
+def _motor(part: Any, index: int, mounting: Any) -> dict[str, float]:
+    """``COMPASS_MOTn_*`` and ``COMPASS_MOTCT`` of a part with an interference term
+    (``stats["interference"]``: the field per A or per unit of throttle ADDED after the matrix,
+    exactly where ``correct_field`` adds ``COMPASS_MOT * current`` or ``* throttle``); nothing
+    for a part without one."""
+    inter = interference(part)
+    if inter is None:
+        return {}
+    per, vec = inter
+    mg = vec * _factor(part.unit, "mG", "mag", FMT, "calibrated")
+    if mounting is not None:
+        mg = mounting.matrix @ mg
+    names = ardupilot_names("mag", index)
+    out = {f"{names['mot']}{a}": check_range(
+        float(mg[i]), -1000.0, 1000.0, f"{names['mot']}{a}",
+        "ArduPilot's range of COMPASS_MOT is -1000..1000 mG per A (or per full throttle)")
+        for i, a in enumerate("XYZ")}
+    out[names["motct"]] = float(AP_MOTCT_CURRENT if per == "A" else AP_MOTCT_THROTTLE)
     return out
 
 
@@ -225,7 +250,7 @@ def _ardupilot(cal: Calibration, *, imu: int = 0, compass: int = 0,
             raise CalibrationError(f"{name} must be 0, 1 or 2 (ArduPilot's first three), got {v!r}")
     out: dict[str, float] = {}
     tcal: dict[str, tuple[np.ndarray, Physical]] = {}
-    n, n1 = _n(imu), str(imu + 1)
+    acc_names, gyr_names = ardupilot_names("accel", imu), ardupilot_names("gyro", imu)
     if "accel" in chosen:
         p = physical(cal.part("accel"), "accel", "m/s^2", "m/s^2", scales, fmt=FMT)
         scale = require_diagonal(p, FMT, "INS_ACCSCAL")
@@ -233,14 +258,14 @@ def _ardupilot(cal: Calibration, *, imu: int = 0, compass: int = 0,
         if p.offset_poly is not None:
             coeff, const = _tcal_coeff(p)
             offset = offset + const
-            tcal["ACC"] = (coeff, p)
+            tcal[acc_names["coeff"]] = (coeff, p)
         for i, a in enumerate("XYZ"):
-            out[f"INS_ACC{n}OFFS_{a}"] = check_range(
-                float(offset[i]), -3.5, 3.5, f"INS_ACC{n}OFFS_{a}",
+            out[f"{acc_names['offset']}{a}"] = check_range(
+                float(offset[i]), -3.5, 3.5, f"{acc_names['offset']}{a}",
                 "ArduPilot's accelerometer offsets range is +-3.5 m/s^2")
         for i, a in enumerate("XYZ"):
-            out[f"INS_ACC{n}SCAL_{a}"] = check_range(
-                float(scale[i]), 0.8, 1.2, f"INS_ACC{n}SCAL_{a}",
+            out[f"{acc_names['scale']}{a}"] = check_range(
+                float(scale[i]), 0.8, 1.2, f"{acc_names['scale']}{a}",
                 "ArduPilot accepts accelerometer scales within 0.8..1.2 (AccelCalibrator "
                 "accept_result); check the calibration's units")
     if "gyro" in chosen:
@@ -250,12 +275,12 @@ def _ardupilot(cal: Calibration, *, imu: int = 0, compass: int = 0,
         if p.offset_poly is not None:
             coeff, const = _tcal_coeff(p)
             offset = offset + const
-            tcal["GYR"] = (coeff, p)
-        name = "INS_GYROFFS_" if imu == 0 else f"INS_GYR{n}OFFS_"
+            tcal[gyr_names["coeff"]] = (coeff, p)
+        name = gyr_names["offset"]
         for i, a in enumerate("XYZ"):
             out[f"{name}{a}"] = float(offset[i])
     if "accel" in chosen or "gyro" in chosen:
-        prefix = f"INS_TCAL{n1}_"
+        prefix = acc_names["tcal"]
         if tcal:
             temps = [float(t) for _, p in tcal.values()
                      for t in (*(p.temp_range_c or ()), p.temp_ref_c) if t is not None]
@@ -265,25 +290,28 @@ def _ardupilot(cal: Calibration, *, imu: int = 0, compass: int = 0,
             out[f"{prefix}ENABLE"] = 1.0
             out[f"{prefix}TMIN"] = lo
             out[f"{prefix}TMAX"] = hi
-            for kind in ("ACC", "GYR"):
+            for kind in (acc_names["coeff"], gyr_names["coeff"]):
                 coeff = tcal[kind][0] if kind in tcal else np.zeros((3, 3))
                 for k in range(3):
                     for i, a in enumerate("XYZ"):
                         out[f"{prefix}{kind}{k + 1}_{a}"] = float(coeff[k, i])
             for kind, (_, p) in tcal.items():
-                out[f"INS_{kind}{n1}_CALTEMP"] = float(p.temp_ref_c or 0.0)
+                caltemp = (acc_names if kind == acc_names["coeff"] else gyr_names)["caltemp"]
+                out[caltemp] = float(p.temp_ref_c or 0.0)
         else:
             # the fit knows no temperature terms: a vehicle's old ones would be applied on top
             out[f"{prefix}ENABLE"] = 0.0
     if "mag" in chosen:
         p = physical(cal.part("mag"), "mag", "mG", "mG", scales, fmt=FMT)
-        mnt = mag_mounting(cal, FMT, f"COMPASS_ORIENT{_n(compass)}")
+        mag_names = ardupilot_names("mag", compass)
+        mnt = mag_mounting(cal, FMT, mag_names["orient"])
         if mnt is not None:  # ArduPilot corrects after rotating: offsets and matrix turn too
             r = mnt.matrix
             p = replace(p, offset=r @ p.offset, matrix=r @ p.matrix @ r.T)
         out.update(_compass(p, compass, compass_scale, float(offsets_max)))
         if mnt is not None:
-            out[f"COMPASS_ORIENT{_n(compass)}"] = float(mnt.number)
+            out[mag_names["orient"]] = float(mnt.number)
+        out.update(_motor(cal.part("mag"), compass, mnt))
     return out, prep
 
 

@@ -44,10 +44,22 @@ import numpy as np
 
 from .._core import __version__
 from ..calibration.file import Calibration
+from ..conventions.autopilot import (
+    PX4_COMP_CURRENT,
+    PX4_COMP_THROTTLE,
+    PX4_COMP_TYPE,
+    PX4_SENSOR,
+    PX4_TC,
+    PX4_TC_ENABLE,
+    px4_prefix,
+    px4_tc_prefix,
+)
+from ..conventions.units import unit_factor
 from ..errors import CalibrationError
 from ._params import (
     Physical,
     f32,
+    interference,
     mag_mounting,
     physical,
     pick_sensors,
@@ -66,8 +78,8 @@ __all__ = ["MAV_PARAM_TYPE_INT32", "MAV_PARAM_TYPE_REAL32", "px4_omitted", "px4_
 FMT = "PX4"
 MAV_PARAM_TYPE_INT32 = 6
 MAV_PARAM_TYPE_REAL32 = 9
-_CAL = {"accel": "ACC", "gyro": "GYRO", "mag": "MAG"}
-_TC = {"accel": "A", "gyro": "G", "mag": "M"}
+_CAL = PX4_SENSOR
+_TC = PX4_TC
 _UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
 
 
@@ -84,7 +96,9 @@ def _device_id(device_ids: Mapping[str, Any] | None, sensor: str,
     if v is None and isinstance(stats.get("autopilot"), Mapping):
         ap = stats["autopilot"]
         if ap.get("autopilot") == "px4" and isinstance(ap.get("params"), Mapping):
-            v = ap["params"].get(f"CAL_{_CAL[sensor]}{ap.get('slot')}_ID")
+            slot = ap.get("slot")
+            v = ap["params"].get(f"{px4_prefix(sensor, slot)}ID") if isinstance(slot, int) \
+                and 0 <= slot <= 3 else None
             if isinstance(v, float) and v.is_integer():
                 v = int(v)
     if v is None or v == 0:
@@ -107,6 +121,27 @@ def _positive(values: np.ndarray, name: str) -> np.ndarray:
                 "(set_scale); a reflected axis means a sign or orientation error in the data"
             )
     return values
+
+
+def _power_compensation(part: Any, p: Physical, n: int) -> list[tuple[str, float, int]]:
+    """``CAL_MAGn_<X|Y|Z>COMP`` and ``CAL_MAG_COMP_TYP`` of a part with an interference term.
+
+    PX4 adds ``power * COMP`` to the raw reading before the offset, in the sensor frame
+    (``Magnetometer::Correct``), with ``power`` the battery current in kA or the throttle
+    (``VehicleMagnetometer::UpdatePowerCompensation``); the part adds ``v * x`` after the matrix,
+    so ``COMP = S^-1 v`` (gauss per kA: ``v`` in gauss per A times 1000)."""
+    inter = interference(part)
+    if inter is None:
+        return []
+    per, vec = inter
+    g = vec * unit_factor(part.unit, "gauss") * (1000.0 if per == "A" else 1.0)
+    comp = np.linalg.solve(p.matrix, g)
+    prefix = px4_prefix("mag", n)
+    out = [(f"{prefix}{a}COMP", float(comp[i]), MAV_PARAM_TYPE_REAL32)
+           for i, a in enumerate("XYZ")]
+    out.append((PX4_COMP_TYPE, float(PX4_COMP_CURRENT if per == "A" else PX4_COMP_THROTTLE),
+                MAV_PARAM_TYPE_INT32))
+    return out
 
 
 def px4_params(
@@ -172,60 +207,61 @@ def _px4(cal: Calibration, *, instance: int = 0, sensors: Iterable[str] | None =
     out: list[tuple[str, float, int]] = []
     real, i32 = MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32
     for sensor in chosen:
-        s, tc = _CAL[sensor], _TC[sensor]
+        cp, tp = px4_prefix(sensor, n), px4_tc_prefix(sensor, n)
         p: Physical = physical(cal.part(sensor), sensor, _UNITS[sensor], _UNITS[sensor],
                                scales, fmt=FMT)
         dev, _ = _device_id(device_ids, sensor, original.part(sensor))
         if dev is not None:
-            out.append((f"CAL_{s}{n}_ID", float(dev), i32))
+            out.append((f"{cp}ID", float(dev), i32))
         else:
             omitted.append(
-                f"CAL_{s}{n}_ID not written: the {sensor}'s device id is not known (give it with "
-                f"--device-id {sensor}=ID, the vehicle's CAL_{s}{n}_ID; device_ids= in Python), "
-                f"so these values apply to whichever device the vehicle's CAL_{s}{n}_ID names")
+                f"{cp}ID not written: the {sensor}'s device id is not known (give it with "
+                f"--device-id {sensor}=ID, the vehicle's {cp}ID; device_ids= in Python), "
+                f"so these values apply to whichever device the vehicle's {cp}ID names")
         offset = p.offset
         for i, a in enumerate("XYZ"):
-            out.append((f"CAL_{s}{n}_{a}OFF", float(offset[i]), real))
+            out.append((f"{cp}{a}OFF", float(offset[i]), real))
         if sensor == "accel":
-            scale = _positive(require_diagonal(p, FMT, f"CAL_ACC{n}_xSCALE"),
-                              f"CAL_ACC{n}_{{a}}SCALE")
+            scale = _positive(require_diagonal(p, FMT, f"{cp}xSCALE"),
+                              f"{cp}{{a}}SCALE")
             for i, a in enumerate("XYZ"):
-                out.append((f"CAL_ACC{n}_{a}SCALE", float(scale[i]), real))
+                out.append((f"{cp}{a}SCALE", float(scale[i]), real))
         elif sensor == "gyro":
             require_identity(p, FMT)
         else:
             require_symmetric(p, FMT)
             m = p.matrix
-            _positive(np.diag(m).copy(), f"CAL_MAG{n}_{{a}}SCALE")
+            _positive(np.diag(m).copy(), f"{cp}{{a}}SCALE")
             for i, a in enumerate("XYZ"):
-                out.append((f"CAL_MAG{n}_{a}SCALE", float(m[i, i]), real))
+                out.append((f"{cp}{a}SCALE", float(m[i, i]), real))
             for (i, j), a in zip(((0, 1), (0, 2), (1, 2)), "XYZ"):
-                out.append((f"CAL_MAG{n}_{a}ODIAG", float(m[i, j]), real))
-            mnt = mag_mounting(cal, FMT, f"CAL_MAG{n}_ROT")
+                out.append((f"{cp}{a}ODIAG", float(m[i, j]), real))
+            mnt = mag_mounting(cal, FMT, f"{cp}ROT")
             if mnt is not None:
-                out.append((f"CAL_MAG{n}_ROT", float(mnt.number), i32))
+                out.append((f"{cp}ROT", float(mnt.number), i32))
+            out += _power_compensation(cal.part("mag"), p, n)
         if p.offset_poly is None:
             # fitted without thermal terms: the vehicle's own would be subtracted on top
-            out.append((f"TC_{tc}_ENABLE", 0.0, i32))
+            out.append((PX4_TC_ENABLE[sensor], 0.0, i32))
             continue
         require_no_gain_poly(p, FMT)
         require_degree(p, FMT, 3)
         if dev is None:
             raise CalibrationError(
-                f"PX4 applies thermal terms TC_{tc}{n}_* only to the sensor whose device id is "
-                f"TC_{tc}{n}_ID: pass device_ids={{'{sensor}': <CAL_{s}{n}_ID of the vehicle>}} "
+                f"PX4 applies thermal terms {tp}* only to the sensor whose device id is "
+                f"{tp}ID: pass device_ids={{'{sensor}': <{cp}ID of the vehicle>}} "
                 "(--device-id on the command line)"
             )
         poly = np.zeros((4, 3))
         poly[: len(p.offset_poly)] = p.offset_poly
         lo, hi = p.temp_range_c or (p.temp_ref_c, p.temp_ref_c)
-        out += [(f"TC_{tc}_ENABLE", 1.0, i32), (f"TC_{tc}{n}_ID", float(dev), i32),
-                (f"TC_{tc}{n}_TREF", float(p.temp_ref_c or 0.0), real),
-                (f"TC_{tc}{n}_TMIN", float(lo or 0.0), real),
-                (f"TC_{tc}{n}_TMAX", float(hi or 0.0), real)]
+        out += [(PX4_TC_ENABLE[sensor], 1.0, i32), (f"{tp}ID", float(dev), i32),
+                (f"{tp}TREF", float(p.temp_ref_c or 0.0), real),
+                (f"{tp}TMIN", float(lo or 0.0), real),
+                (f"{tp}TMAX", float(hi or 0.0), real)]
         for k in range(4):
             for i in range(3):
-                out.append((f"TC_{tc}{n}_X{k}_{i}", float(poly[k, i]), real))
+                out.append((f"{tp}X{k}_{i}", float(poly[k, i]), real))
     return out, prep, omitted
 
 

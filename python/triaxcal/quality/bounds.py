@@ -18,6 +18,9 @@ from ..errors import CalibrationError
 
 __all__ = [
     "ADC_MIDSCALE_COUNTS",
+    "ATTITUDE_MAX_RESIDUAL_PCT",
+    "ATTITUDE_MIN_SCATTER_GAIN",
+    "ATTITUDE_TOLERANCE",
     "CORE",
     "GYRO_SATURATION_COUNTS",
     "LOW_COVERAGE_PCT",
@@ -121,6 +124,31 @@ STRENGTH_TOLERANCE = 0.10
 #: horizontal ellipse is not determined (poses every 20 deg leave 20 deg gaps; a vehicle that
 #: turned a full circle leaves a few degrees).
 MAX_YAW_HEADING_GAP_DEG = 45.0
+
+# ------------------------------------------------------------------------------ flight (attitude)
+
+#: Largest standard error a flight calibration (:mod:`triaxcal.methods.attitude`) may leave on a
+#: parameter it reports as determined: offsets and the interference's largest effect 2 % of the
+#: field (a tenth of the 20 % hard iron a bad compass carries, and about 1 deg of heading);
+#: soft-iron terms 0.02 (ArduPilot's calibrator accepts |ODI| < 1; 0.02 changes the field by
+#: 2 %); a fitted field's components 3.5 % of the field (2 deg of its direction; the WMM's
+#: declination is good to about 0.5 deg).
+ATTITUDE_TOLERANCE = MappingProxyType({
+    "offset_of_field": 0.02,
+    "interference_of_field": 0.02,
+    "soft_iron": 0.02,
+    "field_of_field": 0.035,
+})
+
+#: Residual RMS (% of the field) above which the field did not hold still during the flight (or
+#: the attitude does not belong to the compass): the fit is not a calibration. A good flight
+#: leaves 2-5 % (the attitude's own error of 1-2 deg is 2-3 % of the field).
+ATTITUDE_MAX_RESIDUAL_PCT = 12.0
+
+#: How much a flight calibration must shrink the scatter of the field turned to NED by the
+#: logged attitude, on readings it was not fitted to, against what the log's own calibration
+#: gives, before it counts as an improvement (factor).
+ATTITUDE_MIN_SCATTER_GAIN = 2.0
 
 
 def implausible_radius(sensor: str, value: float, unit: str) -> str | None:
