@@ -110,7 +110,8 @@ def test_readme_workflow_runs_as_written_on_the_demo_files(demo_dir, tmp_path, m
     with sim.SimDevice(speed=10) as dev:
         for argv in lines:
             if argv[0] == "capture":
-                assert argv[argv.index("--out") + 1] == "session.csv"
+                opt = next(a for a in ("-o", "--output", "--out") if a in argv)
+                assert argv[argv.index(opt) + 1] == "session.csv"
                 shutil.copy(demo_dir / "triaxcal-demo" / "session.csv", "session.csv")
                 continue
             if argv[0] == "send":

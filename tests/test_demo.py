@@ -16,7 +16,7 @@ from triaxcal.cli import main
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     t0 = time.monotonic()
-    rc = main(["demo", "--out", str(out), "--quiet"])
+    rc = main(["demo", "--out-dir", str(out), "--quiet"])
     elapsed = time.monotonic() - t0
     return rc, out, json.loads((out / "results.json").read_text()), elapsed
 
@@ -86,7 +86,7 @@ def test_demo_writes_calibration_headers_and_report(demo):
 
 
 def test_demo_prints_a_table_with_units(tmp_path, capsys):
-    rc = main(["demo", "--out", str(tmp_path), "--quiet", "--protocol", "binary", "--seed", "2",
+    rc = main(["demo", "--out-dir", str(tmp_path), "--quiet", "--protocol", "binary", "--seed", "2",
                "--speed", "60"])
     assert rc == 0
     text = capsys.readouterr().out
@@ -162,14 +162,14 @@ def test_fit_and_report_find_the_same_poses_and_coverage(demo, tmp_path, capsys)
     # report on the fit's calibration file, and on the demo's own: 84 readings, same coverage
     for path in (cal, out / "calibration.json"):
         jpath = tmp_path / f"{path.stem}-report.json"
-        assert main(["report", str(path), "--json", str(jpath)]) == 0
+        assert main(["report", str(path), "-o", str(jpath)]) == 0
         rep = json.loads(jpath.read_text())
         assert rep["accel"]["n"] == 84 and rep["accel"]["coverage_pct"] == 100.0
         assert rep["mag"]["n"] == 84
         assert rep["mag"]["coverage_pct"] == fitted.mag.stats["coverage_pct"]
     # and `report SESSION --poses` fits and reports the same 84
     jpath = tmp_path / "session-report.json"
-    assert main(["report", str(session), "--poses", "--json", str(jpath)]) == 0
+    assert main(["report", str(session), "--poses", "-o", str(jpath)]) == 0
     rep = json.loads(jpath.read_text())["accel"]
     assert rep["n"] == 84 and rep["coverage_pct"] == 100.0
 
@@ -177,8 +177,8 @@ def test_fit_and_report_find_the_same_poses_and_coverage(demo, tmp_path, capsys)
 def test_demo_takes_the_pose_options_of_the_command_line(tmp_path):
     # the seed's rule alone (no gyro, no magnetometer) merges the twists at the poles, in the
     # capture and in the detection on the saved session alike
-    rc = main(["demo", "--out", str(tmp_path), "--quiet", "--no-plot", "--gyro-threshold", "off",
-               "--mag-threshold", "off"])
+    rc = main(["demo", "--out-dir", str(tmp_path), "--quiet", "--no-plot", "--gyro-threshold",
+               "off", "--mag-threshold", "off"])
     assert rc == 0
     res = json.loads((tmp_path / "results.json").read_text())
     assert res["poses"] == res["capture"]["poses_online"] < 70

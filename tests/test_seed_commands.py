@@ -175,10 +175,12 @@ def test_sphere_center_scales_and_units(section, tmp_path, capsys):
     assert tc.Calibration.load(out).accel is not None  # the other sensor kept
     for bad, why in ((["--radius", "1g"], "raw units"), (["--radius", "-3"], "radius"),
                      (["--radius", "16384", "--start", "1,2"], "--start"),
-                     (["--radius", "16384", "--scale-to", "3"], "unit"),
-                     (["--radius", "16384", "--method", "grid", "--half-width", "0"],
-                      "half-width")):
+                     (["--radius", "16384", "--scale-to", "3"], "unit")):
         assert why in _fails(capsys, "sphere-center", section / "globe.csv", *bad, "-o", out)
+    with pytest.raises(SystemExit):  # refused as it is parsed
+        main(["sphere-center", str(section / "globe.csv"), "--radius", "16384", "--method",
+              "grid", "--half-width", "0", "-o", str(out)])
+    assert "--half-width: expected a number > 0" in capsys.readouterr().err
     few = tmp_path / "few.csv"
     few.write_text("ax,ay,az\n1,2,3\n4,5,6\n")
     assert "at least 4" in _fails(capsys, "sphere-center", few, "--radius", "10", "-o", out)
@@ -216,10 +218,9 @@ def test_tilt_rig_reproduces_the_seed(section, capsys):
 
 
 def _seed_tilts(section: Path) -> dict[str, np.ndarray]:
-    from triaxcal.cli.tilt_rig import read_tilts
+    from triaxcal.io.sections import read_tilts
 
-    _, groups = read_tilts(section / "tilt.txt")
-    return {k: v[:, 2:5] for k, v in groups.items()}
+    return {k: v[:, 2:5] for k, v in read_tilts(section / "tilt.txt").groups.items()}
 
 
 def test_tilt_rig_layouts_and_errors(section, tmp_path, capsys):

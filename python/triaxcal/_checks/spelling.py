@@ -37,6 +37,14 @@ _FLAGS = {
     "holdoff_s": "--holdoff",
     "offsets_only": "--offsets-only",
     "counts_per_unit": "--counts-per-unit",
+    "angle_deg": "--angle",
+    "rest_s": "--rest",
+    "offset": "--bias",
+    "gyro_offset": "--bias",
+    "nominal_counts_per_dps": "--counts-per-unit",
+    "require_both_directions": "--both-directions",
+    "min_still_s": "--min-still",
+    "max_asymmetry_pct": "--max-asymmetry",
 }
 
 _MISSING = object()

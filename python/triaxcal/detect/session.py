@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
 from ..errors import CalibrationError
 from ._segmenter import PoseDetection
 from .poses import PoseDetector, detect_poses
@@ -207,7 +208,7 @@ class PoseSettings:
         if "accel" not in cols:
             raise CalibrationError(
                 "pose detection needs the accelerometer: name its columns ax, ay, az (as "
-                "triaxcal capture does) or pick them with --columns"
+                f"triaxcal capture does) or pick them ({opt('columns')})"
             )
         if not self.use_gyro:
             cols.pop("gyro", None)
@@ -222,7 +223,7 @@ class PoseSettings:
             if not (math.isfinite(cpg) and cpg > 0):
                 raise CalibrationError(
                     "cannot tell the accelerometer's units from the first rows (they read "
-                    "zero): pass --counts-per-g"
+                    f"zero): give them ({opt('counts_per_g')})"
                 )
         rate = self.rate_hz
         holdoff = 0
@@ -236,8 +237,8 @@ class PoseSettings:
                     times = np.zeros(0)
                 if len(times) < 2 or not times[-1] > times[0]:
                     raise CalibrationError(
-                        "--holdoff needs the sample rate: pass --rate-hz (the session has no "
-                        "usable t column)"
+                        f"{opt('holdoff_s')} needs the sample rate: give it ({opt('rate_hz')}; "
+                        "the session has no usable t column)"
                     )
                 rate = (len(times) - 1) / float(times[-1] - times[0])
             holdoff = int(round(self.holdoff_s * rate))

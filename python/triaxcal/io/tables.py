@@ -35,6 +35,7 @@ from typing import Any, BinaryIO, Iterator
 
 import numpy as np
 
+from .._checks.spelling import opt
 from ..errors import CalibrationError
 from .files import open_regular, os_error_message
 
@@ -630,12 +631,15 @@ def _names_text(names: tuple[str, ...], limit: int = 12) -> str:
     return shown + (f", ... ({len(names)} columns)" if len(names) > limit else "")
 
 
-def pick_columns(table: Table, spec: str | None, sensor: str) -> list[int]:
+def pick_columns(table: Table, spec: str | None, sensor: str, *,
+                 option: str = "columns") -> list[int]:
     """Indices of the three columns named by ``spec`` (names or zero-based indices).
 
     Without ``spec``: the sensor's named columns (:data:`SENSOR_COLUMNS`), the only three
     columns other than ``t``, or the three columns of a headerless file of width 3.
+    ``option`` is the option that gave ``spec`` (its Python name), for the messages.
     """
+    flag = opt(option)
     ncol = table.data.shape[1]
     if spec is None:
         if table.names is not None:
@@ -647,24 +651,24 @@ def pick_columns(table: Table, spec: str | None, sensor: str) -> list[int]:
                 return numeric
             raise CalibrationError(
                 f"{table.path} has columns {_names_text(table.names)} but not "
-                f"{', '.join(want)}: pass --columns (names or zero-based indices, e.g. 0,1,2)"
+                f"{', '.join(want)}: pass {flag} (names or zero-based indices, e.g. 0,1,2)"
             )
         if ncol == 3:
             return [0, 1, 2]
         raise CalibrationError(
-            f"{table.path} has {ncol} unnamed columns: pass --columns with three zero-based "
-            "indices, e.g. --columns 0,1,2"
+            f"{table.path} has {ncol} unnamed columns: pass {flag} with three zero-based "
+            f"indices, e.g. {opt(option, '0,1,2')}"
         )
     parts = [s.strip() for s in spec.split(",") if s.strip()]
     if len(parts) != 3:
-        raise CalibrationError(f"--columns needs three columns (x,y,z), got {_excerpt(spec)!r}")
+        raise CalibrationError(f"{flag} needs three columns (x,y,z), got {_excerpt(spec)!r}")
     out = []
     for s in parts:
         if s.lstrip("-").isdigit():
             i = int(s)
             if not 0 <= i < ncol:
                 raise CalibrationError(
-                    f"--columns: index {i} is out of range; {table.path} has {ncol} columns "
+                    f"{flag}: index {i} is out of range; {table.path} has {ncol} columns "
                     f"(0..{ncol - 1})"
                 )
             out.append(i)
@@ -673,5 +677,5 @@ def pick_columns(table: Table, spec: str | None, sensor: str) -> list[int]:
         else:
             have = (_names_text(table.names) if table.names
                     else "none (headerless: use indices)")
-            raise CalibrationError(f"--columns: no column {_excerpt(s)!r}; names are: {have}")
+            raise CalibrationError(f"{flag}: no column {_excerpt(s)!r}; names are: {have}")
     return out

@@ -1,7 +1,8 @@
 """Calibration methods beyond the plain ellipsoid fit, one module per idea.
 
-* :mod:`~triaxcal.methods.gyro` -- gyroscope bias at rest, gains by integrating known turns,
-  turntable fits.
+* :mod:`~triaxcal.methods.gyro` -- gyroscope bias at rest, gains by integrating known turns.
+* :mod:`~triaxcal.methods.turntable` -- the gyroscope's matrix from turntable plateaus of known
+  rate.
 * :mod:`~triaxcal.methods.imu` -- multi-position accelerometer + gyroscope calibration without a
   rig (Tedaldi et al. 2014).
 * :mod:`~triaxcal.methods.temperature` -- offsets and gains as polynomials in temperature.
@@ -36,9 +37,7 @@ from .gyro import (
     GyroBias,
     GyroGains,
     Rotation,
-    TurntableFit,
     find_rotations,
-    fit_turntable,
     gyro_bias,
     gyro_gains,
 )
@@ -55,6 +54,7 @@ from .static import (
     tilt_rig,
 )
 from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperature
+from .turntable import TurntableFit, fit_turntable
 from .yaw import YawCalibration, fit_yaw
 
 __all__ = [

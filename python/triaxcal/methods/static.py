@@ -47,6 +47,7 @@ import numpy as np
 from .._checks import options as opt
 from .._checks.arrays import as_samples
 from ..errors import CalibrationError
+from ..io.sections import FERRARIS_SECTIONS, TILT_SECTIONS
 from .imu import TriadCalibration
 
 __all__ = [
@@ -59,8 +60,9 @@ __all__ = [
 ]
 
 AXES = "xyz"
-FERRARIS_SECTIONS = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a", "x_rot", "y_rot", "z_rot")
-TILT_KEYS = ("fore_down", "aft_down", "left_down", "right_down")
+#: The four tilts (their names, like the Ferraris sections', live where their files are read:
+#: :mod:`triaxcal.io.sections`).
+TILT_KEYS = TILT_SECTIONS
 
 
 def _ro(a: Any) -> np.ndarray:

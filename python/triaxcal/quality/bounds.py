@@ -17,10 +17,12 @@ from ..conventions.units import STANDARD_GRAVITY, UNITS
 from ..errors import CalibrationError
 
 __all__ = [
+    "ADC_MIDSCALE_COUNTS",
     "ATTITUDE_MAX_RESIDUAL_PCT",
     "ATTITUDE_MIN_SCATTER_GAIN",
     "ATTITUDE_TOLERANCE",
     "CORE",
+    "GYRO_SATURATION_COUNTS",
     "LOW_COVERAGE_PCT",
     "MAX_ACCEL_OFFSET_G",
     "MAX_CLOCK_STEP_BACK_S",
@@ -89,6 +91,12 @@ PHYSICAL_DIAG = MappingProxyType({"accel": (0.8, 1.2), "mag": (0.2, 5.0), "gyro"
 #: tens of mg (MPU-6050: +-50 mg on X/Y, +-80 mg on Z).
 MAX_ACCEL_OFFSET_G = 1.0
 
+#: Zero codes of offset-binary ADCs (unsigned output, 0 g at mid-scale ``2**(bits - 1)``) of 8
+#: to 24 bits: an accelerometer in raw counts whose offsets all lie near one of them (the Xsens
+#: MTi of imu_tk's recording: 33123, 33276, 32360 counts, zero at 32768) has its offset judged
+#: from that code, not from 0.
+ADC_MIDSCALE_COUNTS = tuple(float(2 ** (bits - 1)) for bits in range(8, 25))
+
 #: Largest compass offset ArduPilot accepts by default, mG (``COMPASS_OFFS_MAX``, 1800;
 #: CompassCalibrator.cpp ``fit_acceptable()``), per axis.
 MAX_COMPASS_OFFSET_MG = 1800.0
@@ -96,6 +104,13 @@ MAX_COMPASS_OFFSET_MG = 1800.0
 #: Largest hard iron relative to the field, for a magnetometer whose calibrated unit is not a
 #: field unit: ``COMPASS_OFFS_MAX`` (1800 mG) over the 500 mG of a typical field.
 MAX_HARD_IRON_TO_FIELD = MAX_COMPASS_OFFSET_MG / 500.0
+
+# ------------------------------------------------------------------------------ the gyroscope
+
+#: Raw gyro reading (counts, magnitude) taken as saturated: 99.5 % of a signed 16-bit
+#: register's full scale (32767), where every MEMS gyro of the seeds clips. A turn that reached
+#: it was integrated short, and its gain reads low (``triaxcal gyro-gains`` says so).
+GYRO_SATURATION_COUNTS = 32767 * 0.995
 
 # ------------------------------------------------------------------------------ radius, field
 
