@@ -39,6 +39,7 @@ extensions = [
     "triaxcal_docs",  # API stage pages, CLI reference, offline checks
 ]
 
+smartquotes = False  # "--radius" stays two hyphens, as the command line spells it
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
 exclude_patterns = ["_build", "sg_execution_times.rst", "benchmarks/results.md",

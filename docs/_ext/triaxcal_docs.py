@@ -9,6 +9,8 @@
   (``reference/cli/<command>.rst``): the usage line, the description, every option with its
   help, default and choices, and the old spellings a command still accepts. Help texts are
   written in reST (the terminal shows them as plain text), so here their roles link to the API.
+* **Benchmarks**: the results table the benchmarks write (``docs/benchmarks/results.md``), when
+  present, at the top of the benchmarks page.
 * **Offline check**: after the build, no page may load a script, stylesheet or font from the
   network.
 
@@ -298,9 +300,24 @@ def write_cli_pages(app: Sphinx) -> None:
     _write(out / "index.rst", "\n".join(index) + "\n")
 
 
+# -- benchmarks -------------------------------------------------------------------------------
+
+def write_benchmark_results(app: Sphinx) -> None:
+    """``benchmarks/_results.inc``, included by the benchmarks page: the table the benchmarks
+    write into ``docs/benchmarks/results.md`` when they run (its headings one level down), or
+    nothing when they have not run in this checkout."""
+    src = Path(app.srcdir) / "benchmarks" / "results.md"
+    text = ""
+    if src.is_file():
+        body = re.sub(r"^(#{1,5}) ", r"#\1 ", src.read_text(encoding="utf-8"), flags=re.M)
+        text = "## Latest results (`make bench`)\n\n" + body.strip() + "\n"
+    _write(Path(app.srcdir) / "benchmarks" / "_results.inc", text)
+
+
 def generate(app: Sphinx, config: Any = None) -> None:
     write_api_pages(app)
     write_cli_pages(app)
+    write_benchmark_results(app)
 
 
 # -- offline ------------------------------------------------------------------------------------
@@ -311,11 +328,12 @@ _REMOTE = re.compile(
 _CSS_REMOTE = re.compile(r"""(?:@import|url\()\s*["']?((?:https?:)?//[^"')]+)""", re.I)
 
 
-def remote_assets(outdir: Path) -> list[tuple[str, str]]:
-    """(file, URL) of every script, stylesheet, font, image or frame a built page or stylesheet
-    would load from the network (links to other sites are fine: they are not loaded)."""
+def remote_assets(outdir: Path, pages: list[Path] | None = None) -> list[tuple[str, str]]:
+    """(file, URL) of every script, stylesheet, font, image or frame a built page (all of
+    ``outdir``'s, or ``pages``) or stylesheet would load from the network (links to other sites
+    are fine: they are not loaded)."""
     found = []
-    for page in sorted(outdir.rglob("*.html")):
+    for page in sorted(outdir.rglob("*.html") if pages is None else pages):
         for url in _REMOTE.findall(page.read_text(encoding="utf-8", errors="replace")):
             tag = page.read_text(encoding="utf-8", errors="replace")
             # <link rel="..."> to a page (not a stylesheet or icon) is a link, not an asset
@@ -333,7 +351,9 @@ def remote_assets(outdir: Path) -> list[tuple[str, str]]:
 def check_offline(app: Sphinx, exception: Exception | None) -> None:
     if exception is not None or app.builder.format != "html":
         return
-    for page, url in remote_assets(Path(app.outdir)):
+    outdir = Path(app.outdir)
+    pages = [outdir / app.builder.get_target_uri(doc) for doc in sorted(app.env.found_docs)]
+    for page, url in remote_assets(outdir, [p for p in pages if p.is_file()]):
         logger.warning("%s loads %s from the network: the pages must open offline", page, url,
                        type="triaxcal", subtype="offline")
 

@@ -1,4 +1,4 @@
-"""How ``triaxcal report`` treats parts made by the seed-method commands.
+"""How ``triaxcal report`` treats parts made by the method commands.
 
 A tilt-rig part is judged on its readings like a fitted part (their calibrated lengths should
 be 1 g); its file is a tilt-rig file, read here. Gyro gains, temperature terms and a bias are

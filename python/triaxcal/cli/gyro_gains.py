@@ -1,12 +1,12 @@
 """triaxcal gyro-gains SESSION --angle 90: gyroscope gains by integrating turns of a known
-angle, both ways about every axis (gyro-integration-calibration.txt).
+angle, both ways about every axis (the turn-integration method).
 
 Hold the board still, turn it by --angle degrees about one of its axes (90 on a cube resting
 on a table: face to face), hold it still again; clockwise and counter-clockwise about x, y and
 z. Each turn between two still periods is integrated (trapezoid rule), assigned to its axis and
 direction, and gives gain = |integral| / angle in counts per deg/s. The bias is the mean of
-the still periods. The gains **divide**, as in the seed's (raw - offset) / gain; the part
-written holds matrix = diag(1 / gain) (it multiplies) and gives deg/s.
+the still periods. The gains **divide**, as in the turn-integration method's (raw - offset) / gain;
+the part written holds matrix = diag(1 / gain) (it multiplies) and gives deg/s.
 
 Clockwise and counter-clockwise gains of one axis should agree; when they differ by more than
 --max-asymmetry percent the command names the axis and the likely cause.
@@ -27,7 +27,8 @@ from ..io.tables import pick_columns, read_table
 from ..methods.gyro import gyro_gains
 from ._calfile import add_output_options, file_sha256, save_part
 
-HELP = "gyroscope gains from turns of a known angle, both ways about each axis (the seed's)"
+HELP = ("gyroscope gains from turns of a known angle, both ways about each axis (the original "
+        "method's)")
 
 #: int16 full scale: a raw reading this close to it is taken as saturated.
 SATURATION = 32767 * 0.995
