@@ -94,11 +94,10 @@ sphinx_gallery_conf = {
     "gallery_dirs": "auto_examples",
     "filename_pattern": r"/plot_",  # every example runs during the build
     "ignore_pattern": r"__init__\.py|gallery_data\.py",
-    "within_subsection_order": "FileNameSortKey",
+    "within_subsection_order": "triaxcal_docs.GalleryOrder",  # the pipeline's order
     "download_all_examples": False,
     "remove_config_comments": True,
     "abort_on_example_error": True,
-    "reference_url": {"triaxcal": None},  # code names link to the API pages
     "doc_module": ("triaxcal",),
     "backreferences_dir": "reference/api/backrefs",  # the examples that use each name
     "image_scrapers": ("matplotlib",),

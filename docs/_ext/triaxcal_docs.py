@@ -300,6 +300,33 @@ def write_cli_pages(app: Sphinx) -> None:
     _write(out / "index.rst", "\n".join(index) + "\n")
 
 
+# -- the gallery's order ------------------------------------------------------------------------
+
+#: The gallery in the order of the pipeline: fit, report, gate, the methods, noise, export.
+#: Examples not listed follow, by file name.
+GALLERY_ORDER = [
+    "plot_fit_tumble.py", "plot_report_figure.py", "plot_validity_gate.py",
+    "plot_sphere_centre_descent.py", "plot_tilt_rig.py", "plot_gyro_turns.py",
+    "plot_temperature_drift.py", "plot_turntable.py", "plot_imu_tedaldi.py",
+    "plot_yaw_only.py", "plot_allan_deviation.py", "plot_export_c_header.py",
+]
+
+
+class GalleryOrder:
+    """sphinx-gallery's ``within_subsection_order``: :data:`GALLERY_ORDER`, then by name."""
+
+    def __init__(self, src_dir: str) -> None:
+        self.src_dir = src_dir
+
+    def __call__(self, filename: str) -> tuple[int, str]:
+        name = Path(filename).name
+        rank = GALLERY_ORDER.index(name) if name in GALLERY_ORDER else len(GALLERY_ORDER)
+        return rank, name
+
+    def __repr__(self) -> str:
+        return "GalleryOrder"
+
+
 # -- benchmarks -------------------------------------------------------------------------------
 
 def write_benchmark_results(app: Sphinx) -> None:

@@ -31,7 +31,7 @@ def fit(*args):
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
         status = main(["fit", *map(str, args), "-o", str(work / "cal.json")])
     print(f"exit status {status}; cal.json written: {(work / 'cal.json').exists()}")
-    print(textwrap.fill(err.getvalue(), 88))
+    print(textwrap.fill(err.getvalue(), 80))
 
 
 ulog = recording("px4-pyulog-samples/sample.ulg")
