@@ -97,15 +97,15 @@ def test_demo_prints_a_table_with_units(tmp_path, capsys):
     assert res["protocol"] == "binary" and res["ok"]
 
 
-def test_readme_capture_example_runs(tmp_path, monkeypatch):
+def test_capture_page_simulator_example_runs(tmp_path, monkeypatch):
     import re
 
-    from conftest import readme_section
+    from conftest import doc_page
 
-    code = re.findall(r"```python\n(.*?)```", readme_section("Capture"), re.S)[0]
+    code = re.findall(r"```python\n(.*?)```", doc_page("guide/capture.md"), re.S)[0]
     monkeypatch.chdir(tmp_path)
     env: dict = {}
-    exec(compile(code, "README.md", "exec"), env)
+    exec(compile(code, "docs/guide/capture.md", "exec"), env)
     assert env["result"].stopped_by == "poses" and len(env["result"].poses) == 10
     assert abs(np.linalg.norm(env["g"], axis=1).mean() - 1.0) < 1e-3
     assert (tmp_path / "session.csv").read_text().startswith("t,ax,ay,az,")

@@ -450,10 +450,10 @@ def test_request_byte_forms():
         parse_request_byte("0x1FF")
 
 
-def test_readme_capture_section_names_the_command():
-    from conftest import readme_section
+def test_capture_page_names_the_command():
+    from conftest import doc_page
 
-    section = readme_section("Capture")
+    section = doc_page("guide/capture.md")
     assert "triaxcal capture --port" in section and "triaxcal demo" in section
 
 

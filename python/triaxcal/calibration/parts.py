@@ -1,6 +1,6 @@
-"""Calibration-file parts from the seed methods' results.
+"""Calibration-file parts from the methods' results.
 
-Each seed method returns its own small result (:class:`~triaxcal.fit.Descent`,
+Each method returns its own small result (:class:`~triaxcal.fit.Descent`,
 :class:`~triaxcal.methods.static.TiltRig`, :class:`~triaxcal.methods.gyro.GyroGains`,
 :class:`~triaxcal.methods.temperature.TemperatureModel`); the functions here turn one into a
 :class:`~triaxcal.calibration.SensorCalibration`, the part a calibration file holds, in the
@@ -83,7 +83,7 @@ def part_from_center(
     input_sha256: str | None = None,
     force: bool = False,
 ) -> SensorCalibration:
-    """A part from the centre of a sphere of known radius (the seed's zero offset).
+    """A part from the centre of a sphere of known radius (the sphere-centre zero offset).
 
     Parameters
     ----------
@@ -196,7 +196,8 @@ def part_from_gyro_gains(
 ) -> SensorCalibration:
     """A gyroscope part from :func:`~triaxcal.gyro_gains`: calibrated rates in deg/s.
 
-    The gains are counts per deg/s and **divide** (the seed's ``(raw - offset) / gain``); the
+    The gains are counts per deg/s and **divide** (the turn-integration method's ``(raw - offset) /
+    gain``); the
     part's matrix **multiplies**, so it holds ``diag(1 / gain)``.
 
     An axis the recording did not turn about (``gyro_gains(..., axes="z")``: NaN gains) keeps
@@ -293,7 +294,7 @@ def part_from_temperature(
 
     With ``base`` (the sensor's part already in the file, e.g. from ``gyro-gains``), its
     matrix, units and radius are kept and its offset is replaced by the model's offset at the
-    reference temperature, the drift going into ``offset_poly``: the seed's
+    reference temperature, the drift going into ``offset_poly``: the original method's
     ``(raw - (tempcomp * dT + offset)) / gain``. Without ``base`` the part is
     :meth:`SensorCalibration.from_temperature_model` (counts in, counts out).
 

@@ -86,7 +86,7 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--accel-threshold", type=positive_float, default=_D.accel_threshold_g,
                    metavar="G",
                    help="accelerometer: largest change of a window mean from the previous "
-                        "window, in g (default %(default)s, the seed's rule)")
+                        "window, in g (default %(default)s, the sphere-centre method's rule)")
     g.add_argument("--counts-per-g", dest="counts_per_g",
                    type=positive_float, default=None, metavar="C",
                    help="accelerometer units per g (16384 at +-2 g; 1 for a board that prints "
@@ -104,11 +104,12 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
                         "noise; 'off': it does not take part")
     g.add_argument("--hold", type=_hold, default=_D.hold_windows, metavar="W",
                    help="register a pose once it has been still for W windows (the capture's "
-                        "bell, the seed's beep), then average it until the board moves; 'off': "
+                        "bell, the sphere-centre note's beep), then average it until the board "
+                        "moves; 'off': "
                         "decide when the board moves (default %(default)s)")
     g.add_argument("--holdoff", type=nonnegative_float, default=_D.holdoff_s, metavar="S",
                    help="seconds ignored after each registered pose, to let go of the board "
-                        "(the seed waits 2 s after its beep: --holdoff 2). Default 0")
+                        "(the sphere-centre note waits 2 s after its beep: --holdoff 2). Default 0")
     g.add_argument("--rate-hz", type=positive_float, default=None, metavar="HZ",
                    help="samples per second, to turn --holdoff into samples (default: from the "
                         "arrival times, the session's t column)")

@@ -24,8 +24,8 @@ with everything saved. The session CSV has a header 't,<channels>' and one row p
 host time in seconds, then the values as received (counts).
 
 With --board-poses the board finds the poses itself (the triaxcal firmware's mode S: the
-seed's window method, run on the board, with the gyro watching for turns) and sends one mean
-per pose; each becomes a row of the session, with a last column pose_n (samples averaged),
+sphere-centre note's window method, run on the board, with the gyro watching for turns) and sends
+one mean per pose; each becomes a row of the session, with a last column pose_n (samples averaged),
 and beeps its buzzer. The pose-detection options below are sent to the board (in its
 counts: --counts-per-g, default 16384, turns --accel-threshold into counts; --gyro-threshold
 auto is the firmware's 393 counts = 3 deg/s; --rate-hz sets its sample rate, default 100).

@@ -1,12 +1,12 @@
 """triaxcal gyro-gains SESSION --angle 90: gyroscope gains by integrating turns of a known
-angle, both ways about every axis (gyro-integration-calibration.txt).
+angle, both ways about every axis (the turn-integration method).
 
 Hold the board still, turn it by --angle degrees about one of its axes (90 on a cube resting
 on a table: face to face), hold it still again; clockwise and counter-clockwise about x, y and
 z. Each turn between two still periods is integrated (trapezoid rule), assigned to its axis and
 direction, and gives gain = |integral| / angle in counts per deg/s. The bias is the mean of
-the still periods. The gains **divide**, as in the seed's (raw - offset) / gain; the part
-written holds matrix = diag(1 / gain) (it multiplies) and gives deg/s.
+the still periods. The gains **divide**, as in the turn-integration method's (raw - offset) / gain;
+the part written holds matrix = diag(1 / gain) (it multiplies) and gives deg/s.
 
 Turns without a pause (--turns whole): two 360 deg turns in a row are one turn of 720 deg,
 from the end of the rest at the start to the start of the rest at the end; a recording that
@@ -42,7 +42,8 @@ from ._help import renamed
 from ._method_options import add_bias_option, bias_from_args, counts_per_unit, nominal
 from ._pose_options import nonnegative_float, positive_float
 
-HELP = "gyroscope gains from turns of a known angle, both ways about each axis (the seed's)"
+HELP = ("gyroscope gains from turns of a known angle, both ways about each axis (the original "
+        "method's)")
 
 
 def _turns(text: str) -> str | list[tuple[int, int]] | None:

@@ -1,7 +1,7 @@
 """triaxcal sphere-center FILE --radius R [--method descent|grid|fit]: the zero offset as
-the centre of a sphere of known radius (sphere-center-descent.txt).
+the centre of a sphere of known radius (the sphere-centre method).
 
-The seed's readings lie on a sphere of radius R (16384 counts = 1 g for a 16-bit +-2 g
+Still readings lie on a sphere of radius R (16384 counts = 1 g for a 16-bit +-2 g
 accelerometer) around the unknown offset. descent is its variable-step 26-neighbour
 search: from --start (0,0,0), move to the neighbour one --step (1000) away that lowers
 the error sum  sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|, else divide the step by --shrink
@@ -36,7 +36,7 @@ from ..io.tables import pick_columns, read_table
 from ._calfile import add_output_options, save_part
 from ._pose_options import add_pose_options, positive_float, settings_from_args
 
-HELP = "zero offset as the centre of a sphere of known radius (the seed's descent)"
+HELP = "zero offset as the centre of a sphere of known radius (variable-step descent)"
 
 
 
@@ -50,8 +50,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the sphere's radius in the readings' raw units (16384 counts = 1 g at "
                         "+-2 g, 16 bit)")
     p.add_argument("--method", choices=CENTER_METHODS, default="descent",
-                   help="descent (the seed's variable-step search, default), grid (its cube "
-                        "search), fit (least squares for the centre)")
+                   help="descent (the sphere-centre method's variable-step search, default), "
+                        "grid (its cube search), fit (least squares for the centre)")
     p.add_argument("--step", type=positive_float, default=None, metavar="S",
                    help="descent: first step (default 1000); grid: node spacing (default "
                         "half-width / 20)")
@@ -60,7 +60,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--shrink", type=float, default=10.0, metavar="F",
                    help="descent: divide the step by F when no neighbour is better (default 10)")
     p.add_argument("--start", default="0,0,0", metavar="X,Y,Z",
-                   help="descent: start point, raw units (default 0,0,0, the seed's)")
+                   help="descent: start point, raw units (default 0,0,0, as the sphere-centre "
+                        "method starts)")
     p.add_argument("--half-width", type=positive_float, default=None, metavar="W",
                    help="grid: search the cube mean +- W (default R / 10)")
     p.add_argument("--no-refine", action="store_true",

@@ -1,16 +1,16 @@
 """triaxcal tilt-rig FILE --angle 10: accelerometer offsets and gains from a rig tilted by a
-known angle, nose down / nose up and left down / right down (tilt-rig-gravity-calibration.txt).
+known angle, nose down / nose up and left down / right down (the two-tilt method).
 
 FILE holds the readings of the four tilts, in either layout:
 
-* the seed's: a line FD (fore down), AD (aft down), LD (left down) or RD (right
+* the original method's: a line FD (fore down), AD (aft down), LD (left down) or RD (right
   down) -- or fore_down, ... -- followed by that tilt's rows;
 * a label in the first column of every row: FD,-0.1429,0.0127,1.0509.
 
 Rows are numbers separated by commas, semicolons, tabs or spaces; --columns picks the
 accelerometer's three (by zero-based index, or by name with a header row ax,ay,az).
 
-With the seed's algebra corrected (gain = sin(angle) / |s - s'| * 2, not sin / (s + o)),
+With the original method's algebra corrected (gain = sin(angle) / |s - s'| * 2, not sin / (s + o)),
 the offsets of x and y and the gains of all three axes follow; z's offset cannot be told
 from its gain without an upside-down reading (--z-offset, default 0). The tilt the data
 imply (equal gains assumed) is printed; when it differs from --angle by more than a degree
@@ -31,7 +31,7 @@ from ..io.tables import pick_columns
 from ..methods.static import tilt_rig
 from ._calfile import add_output_options, save_part
 
-HELP = "accelerometer offsets and gains from a rig tilted by a known angle (the seed's rig)"
+HELP = "accelerometer offsets and gains from a rig tilted by a known angle (the two-tilt rig)"
 
 #: Largest difference (degrees) between the stated tilt and the one the data imply before the
 #: command warns.
@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("data", metavar="FILE", help="readings of the four tilts (see above)")
     p.add_argument("--angle", type=float, required=True, metavar="DEG",
-                   help="the rig's tilt in degrees (the seed's: 10)")
+                   help="the rig's tilt in degrees (the original method's: 10)")
     p.add_argument("--columns", default=None,
                    help="the accelerometer's three columns, by zero-based index or header "
                         "name (default: ax,ay,az by name, or the only three)")

@@ -3,7 +3,8 @@
 
 A session (a table whose columns are named ``ax ay az gx gy gz mx my mz ...``, as ``triaxcal
 capture`` writes them) is reduced to still poses by :class:`~triaxcal.detect.PoseDetector` with
-every sensor the session has: the accelerometer's window-mean change (the seed's 0.07 g), the
+every sensor the session has: the accelerometer's window-mean change (the original method's 0.07
+g), the
 gyroscope's rate and the magnetometer's change (thresholds learnt from their noise unless
 given). :class:`PoseSettings` holds what a user can choose on the command line;
 :meth:`PoseSettings.resolve` turns it into the detector's options for a given session, filling
@@ -106,7 +107,7 @@ class PoseSettings:
         Samples per averaging window.
     accel_threshold_g : float
         Largest change of the accelerometer's window mean between two windows, in g (the
-        seed's 0.07).
+        original method's 0.07).
     counts_per_g : float, optional
         Accelerometer units per g. ``None``: the median length of the accelerometer readings
         in the first :data:`HEAD_ROWS` rows (the board lies still at the start, so that is 1 g
@@ -118,10 +119,12 @@ class PoseSettings:
         In the sensor's raw units (counts). ``None``: learnt from the sensor's noise.
     hold_windows : int, optional
         A run is registered (or rejected) once it has this many windows -- the capture's bell,
-        the seed's beep -- and then goes on averaging until the board moves. ``None``: decided
+        the sphere-centre note's beep -- and then goes on averaging until the board moves.
+        ``None``: decided
         when the board moves. The same in capture and fit, so both make the same decisions.
     holdoff_s : float
-        Seconds ignored after each registered pose (the seed's 2 s after its beep); 0: none.
+        Seconds ignored after each registered pose (the original method's 2 s after its beep); 0:
+        none.
     rate_hz : float, optional
         Samples per second, to turn ``holdoff_s`` into samples. ``None``: from the session's
         ``t`` column (host arrival times) over the first :data:`HEAD_ROWS` rows.

@@ -1,13 +1,13 @@
 """Sphere and ellipsoid fits: the Python face of the Rust core, model choice and outlier
 rejection.
 
-* :mod:`~triaxcal.fit.ellipsoid` -- the fits themselves (sphere, axis, full), the seed's
+* :mod:`~triaxcal.fit.ellipsoid` -- the fits themselves (sphere, axis, full), the original method's
   sphere-centre descent and the batch fit, each a thin, validating call into ``triaxcal._core``;
   model choice by information criterion (``model="auto"``).
 * :mod:`~triaxcal.fit.select` -- outlier rejection around a fit (Magneto's rule and the
   default robust rule).
 * :mod:`~triaxcal.fit.center` -- the zero offset as the centre of a sphere of known radius
-  (the seed's descent, its grid search, or a fixed-radius fit).
+  (the sphere-centre method's descent, its grid search, or a fixed-radius fit).
 """
 
 from .center import CENTER_METHODS, SphereCenter, sphere_center

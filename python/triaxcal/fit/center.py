@@ -5,7 +5,7 @@ accelerometer) around the unknown offset; because ``R`` is known, a part of the 
 "wedge") is enough. Three ways to find the centre, each a call into the Rust core
 (:mod:`triaxcal.fit.ellipsoid`):
 
-* ``"descent"``: the seed's variable-step 26-neighbour search of the error sum
+* ``"descent"``: the sphere-centre method's variable-step 26-neighbour search of the error sum
   ``sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|`` (:func:`~triaxcal.fit.ellipsoid.descend_center`);
 * ``"grid"``: its brute-force cube search around the mean of the readings, repeated around the
   best node 20 times finer down to ``min_step`` (:func:`~triaxcal.fit.ellipsoid.grid_center`);
@@ -83,7 +83,7 @@ def sphere_center(
     shrink : float
         descent: divide the step by this when no neighbour is better.
     start : array_like (3,)
-        descent: the start point (the seed's 0, 0, 0).
+        descent: the start point (the sphere-centre method's 0, 0, 0).
     half_width : float, optional
         grid: search the cube ``mean +- half_width`` (default ``radius / 10``).
     refine : bool

@@ -3,7 +3,7 @@ and three turns.
 
 Two layouts of one file, read by :func:`read_sections`:
 
-* a label on a line of its own (the tilt-rig seed's ``FD``, ``AD``, ...), followed by that
+* a label on a line of its own (the tilt-rig method's ``FD``, ``AD``, ...), followed by that
   section's rows;
 * a label in the first column of every row (imucal's ``annotated_session.csv``:
   ``part,samples,acc_x,...`` then ``x_p,0,...``).
@@ -47,7 +47,7 @@ __all__ = [
 
 #: The four tilts of a tilt rig, in the order the method takes them.
 TILT_SECTIONS = ("fore_down", "aft_down", "left_down", "right_down")
-#: Labels a tilt-rig file may use for them (the seed's FD, AD, LD, RD among them).
+#: Labels a tilt-rig file may use for them (the sphere-centre method's FD, AD, LD, RD among them).
 TILT_LABELS = {"fd": "fore_down", "ad": "aft_down", "ld": "left_down", "rd": "right_down",
                **{k: k for k in TILT_SECTIONS}, "fore-down": "fore_down",
                "aft-down": "aft_down", "left-down": "left_down", "right-down": "right_down"}

@@ -1,10 +1,11 @@
 """Gyroscope calibration: bias at rest, gain by integrating known rotations (turntable fits:
 :mod:`triaxcal.methods.turntable`).
 
-Error model (per axis, the seed gyro-integration-calibration.txt): a raw reading ``w`` (counts)
+Error model (per axis, as the turn-integration method writes it): a raw reading ``w`` (counts)
 of a true rate ``r`` (deg/s) is ``w = offset + gain * r``; ``gain`` is in **counts per deg/s**
 and **divides**: ``r = (w - offset) / gain``. Its inverse, ``scale = 1 / gain`` in **deg/s per
-count**, multiplies. (The seed's readers mixed the two up: MPU-6050 at +-2000 deg/s has a
+count**, multiplies. (Readers of the turn-integration method mixed the two up: MPU-6050 at +-2000
+deg/s has a
 gain of 16.4 counts per deg/s, i.e. a scale of 0.061 deg/s per count.) The full 3x3 model,
 ``rate = (w - offset) @ matrix.T`` with ``matrix`` in rad/s per count, is fitted by
 :func:`triaxcal.calibrate_imu` (rotations between still poses) and
@@ -419,7 +420,7 @@ def gyro_gains(
     nominal_counts_per_dps: float | None = None,
     axes: str = "xyz",
 ) -> GyroGains:
-    """Gyro gain per axis and direction by integrating rotations of a known angle (the seed).
+    """Gyro gain per axis and direction by integrating rotations of a known angle.
 
     Turn the sensor by ``angle_deg`` (90 on a cube; 360 or more is better) about each of its
     axes, both ways, holding it still before and after each turn. Each rotation is found
@@ -454,7 +455,7 @@ def gyro_gains(
     min_purity : float
         Rotations with less than this share of the integral on one axis are rejected.
     require_both_directions : bool
-        Raise unless every axis was turned both ways (the seed's six rotations).
+        Raise unless every axis was turned both ways (the six turns of the turn-integration method).
     nominal_counts_per_dps : float, optional
         The datasheet gain (131 for an MPU-6050 at +-250 deg/s), used to judge which rotations
         are too small or too large; ``None``: taken from the larger rotations found.

@@ -48,8 +48,8 @@ def turntable_plateaus(
     """Constant-rate plateaus of a turntable recording: means (M, 3) and sample counts (M,).
 
     A plateau is a run of windows whose mean rate vector stays within ``threshold`` (input
-    units; default 1 % of ``min_rate``) -- the seed's stillness test applied to the gyro --
-    with a magnitude of at least ``min_rate`` (spin-up, spin-down and reorientation pauses
+    units; default 1 % of ``min_rate``) -- the sphere-centre method's stillness test applied to
+    the gyro -- with a magnitude of at least ``min_rate`` (spin-up, spin-down and reorientation pauses
     are dropped).
     """
     g = _as_rate(gyro)

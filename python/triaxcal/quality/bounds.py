@@ -108,7 +108,7 @@ MAX_HARD_IRON_TO_FIELD = MAX_COMPASS_OFFSET_MG / 500.0
 # ------------------------------------------------------------------------------ the gyroscope
 
 #: Raw gyro reading (counts, magnitude) taken as saturated: 99.5 % of a signed 16-bit
-#: register's full scale (32767), where every MEMS gyro of the seeds clips. A turn that reached
+#: register's full scale (32767), where every MEMS gyro the methods meet clips. A turn that reached
 #: it was integrated short, and its gain reads low (``triaxcal gyro-gains`` says so).
 GYRO_SATURATION_COUNTS = 32767 * 0.995
 

@@ -175,7 +175,7 @@ def globe_script(
     jitter_deg: float = 2.0,
     seed: int = 0,
 ) -> Script:
-    """The seed's globe scheme: ``latitudes`` points on a meridian x ``turns`` twists = poses.
+    """The globe scheme: ``latitudes`` points on a meridian x ``turns`` twists = poses.
 
     The board sits flat on a globe at latitude ``phi`` (from +90 to -90 degrees, evenly
     spaced, poles included) on the meridian facing ``azimuth_deg`` (degrees from north towards
