@@ -49,8 +49,8 @@ def turntable_plateaus(
 
     A plateau is a run of windows whose mean rate vector stays within ``threshold`` (input
     units; default 1 % of ``min_rate``) -- the sphere-centre method's stillness test applied to
-    the gyro -- with a magnitude of at least ``min_rate`` (spin-up, spin-down and reorientation pauses
-    are dropped).
+    the gyro -- with a magnitude of at least ``min_rate`` (spin-up, spin-down and reorientation
+    pauses are dropped).
     """
     g = _as_rate(gyro)
     low = opt.number(min_rate, "min_rate", gt=0, hint="the slowest plateau, gyro units")
