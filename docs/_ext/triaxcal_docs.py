@@ -228,7 +228,10 @@ def command_page(name: str, parser: argparse.ArgumentParser, summary: str) -> st
     usage = formatter.format_help().strip()
     lines += [".. code-block:: text\n", textwrap.indent(usage, "   ") + "\n"]
     if parser.description:
-        lines.append(_escape_bars(textwrap.dedent(parser.description).strip()) + "\n")
+        text = _escape_bars(textwrap.dedent(parser.description).strip())
+        # the terminal's "examples:" paragraph of indented command lines: a literal block here
+        text = re.sub(r"(?m)^examples:\n(?=  )", "Examples::\n\n", text)
+        lines.append(text + "\n")
     renamed: list[tuple[str, str]] = []
     for group in parser._action_groups:
         actions = [a for a in group._group_actions

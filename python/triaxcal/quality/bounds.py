@@ -140,7 +140,7 @@ MAX_YAW_HEADING_GAP_DEG = 45.0
 #: Largest standard error a flight calibration (:mod:`triaxcal.methods.attitude`) may leave on a
 #: parameter it reports as determined: offsets and the interference's largest effect 2 % of the
 #: field (a tenth of the 20 % hard iron a bad compass carries, and about 1 deg of heading);
-#: soft-iron terms 0.02 (ArduPilot's calibrator accepts |ODI| < 1; 0.02 changes the field by
+#: soft-iron terms 0.02 (ArduPilot's calibrator accepts ``|ODI| < 1``; 0.02 changes the field by
 #: 2 %); a fitted field's components 3.5 % of the field (2 deg of its direction; the WMM's
 #: declination is good to about 0.5 deg).
 ATTITUDE_TOLERANCE = MappingProxyType({
