@@ -153,7 +153,7 @@ def demo_dir(tmp_path_factory):
     """`triaxcal demo`: a moving capture session (the board tumbled through 84 poses) and its
     calibration (accelerometer in g, gyroscope in deg/s)."""
     out = tmp_path_factory.mktemp("demo") / "demo"
-    assert main(["demo", "--no-plot", "--quiet", "--out", str(out)]) == 0
+    assert main(["demo", "--no-plot", "--quiet", "--out-dir", str(out)]) == 0
     return out
 
 
