@@ -154,7 +154,7 @@ def test_live_poses_are_those_of_triaxcal_fit_poses(recording, tmp_path):
     live = np.array(st._poses)[:, :3]
     np.testing.assert_allclose(live, det.points, rtol=0, atol=1e-9)
     # the live accelerometer fit is fit_robust on those poses with fit's options
-    ref = fit_robust(det.points, model="auto", radius=1.0, sigma=2.0, max_rounds=10)
+    ref = fit_robust(det.points, model="auto", radius=1.0, max_rounds=10)  # fit's default rule
     fit = doc["sensors"]["accel"]["fit"]
     np.testing.assert_allclose(fit["offset"], ref.fit.offset, rtol=1e-9)
     np.testing.assert_allclose(fit["matrix"], ref.fit.matrix, rtol=1e-9)
