@@ -84,17 +84,26 @@ def align(rows, sent):
     return positions, wrong
 
 
-def check_exact(rows, sent):
-    """No wrong row; every intact frame between the first and last row was captured."""
+def on_time(frame, poll_timeout_s: float = 0.1) -> bool:
+    """A streamed frame, or a polled reply that the board sent within the reader's poll
+    timeout (``SerialReader``'s default: 0.1 s) and not back to back with another reply."""
+    return frame.reply_s is None or frame.reply_s < poll_timeout_s
+
+
+def check_exact(rows, sent, poll_timeout_s: float = 0.1):
+    """No wrong row; every intact frame between the first and last row was captured (for a
+    polled reply: every intact reply sent on time, see ``on_time``)."""
     assert rows, "nothing captured"
     positions, wrong = align(rows, sent)
     assert not wrong, f"{len(wrong)} rows that the device never sent, e.g. {wrong[:2]}"
     # the intact frames in that span are a subsequence of the rows (exact even when a polled
     # board repeats a sample, so that values alone cannot say which reply a row came from)
-    intact = [f.values for f in sent[positions[0]:positions[-1] + 1] if f.intact]
+    intact = [k for k in range(positions[0], positions[-1] + 1)
+              if sent[k].intact and on_time(sent[k], poll_timeout_s)]
     it = iter(rows)
-    missing = [v for v in intact if not any(v == r for r in it)]
-    assert not missing, f"{len(missing)} intact frames not captured, e.g. {missing[:2]}"
+    missing = [k for k in intact if not any(sent[k].values == r for r in it)]
+    assert not missing, (f"{len(missing)} intact frames not captured, the first: "
+                         f"{sent[missing[0]] if missing else None}")
     return positions
 
 
@@ -124,7 +133,10 @@ def test_every_protocol_captures_exactly_what_was_sent(tmp_path, protocol, strea
         # streaming: a contiguous run of frames, none lost
         assert positions == list(range(positions[0], positions[0] + 400))
     else:
-        assert reader.stats.polls >= 400 and reader.stats.poll_failures == 0
+        # a request fails only when the board answered it late (a stalled simulator thread
+        # on a loaded machine): no fault is injected here
+        late = sum(not on_time(f) for f in sent if f.polled)
+        assert reader.stats.polls >= 400 and reader.stats.poll_failures <= late
     header = out.read_text().splitlines()[0]
     assert header == "t," + ",".join(channel_names(protocol, 9 if protocol == "raw" else 10))
     if protocol == "binary":
@@ -178,7 +190,7 @@ def test_faults_lose_only_damaged_frames_and_never_write_a_wrong_row(tmp_path, p
         capture(reader, out, samples=500, progress=None, handle_sigint=False)
         sent = list(dev.sent)
     rows = session_rows(out)
-    positions = check_exact(rows, sent)
+    positions = check_exact(rows, sent, poll_timeout_s=0.05)
     span = sent[positions[0]:positions[-1] + 1]
     damaged = sum(not f.intact for f in span)
     assert damaged >= 20, "the test needs faults to mean anything"
@@ -189,6 +201,36 @@ def test_faults_lose_only_damaged_frames_and_never_write_a_wrong_row(tmp_path, p
         assert st.decoder.dropped_frames > 0 and st.decoder.lost_frames >= damaged // 2
     else:
         assert st.decoder.lines_skipped > 0
+
+
+def test_a_board_that_stalls_loses_only_its_late_replies(tmp_path):
+    """A board that stops reading for longer than the poll timeout (busy, or a simulator
+    thread starved on a loaded machine) answers the waiting requests late and back to back.
+    The reader gives up on them (a reply that comes too late, or glued to another, cannot be
+    told from garbage) and never writes a wrong row; every reply sent on time is captured."""
+    out = tmp_path / "s.csv"
+    with device(speed=10.0) as dev:
+        stop = threading.Event()
+
+        def stalls():
+            while not stop.wait(0.15):
+                dev.stall(0.12)
+
+        t = threading.Thread(target=stalls)
+        reader = SerialReader(dev.port, protocol="binary", channels=10, poll_timeout_s=0.05)
+        t.start()
+        try:
+            capture(reader, out, samples=300, progress=None, handle_sigint=False)
+        finally:
+            stop.set()
+            t.join()
+        sent = list(dev.sent)
+    rows = session_rows(out)
+    check_exact(rows, sent, poll_timeout_s=0.05)
+    late = [f for f in sent if not on_time(f, 0.05)]
+    assert len(late) >= 5 and reader.stats.poll_failures >= 5
+    assert any(f.reply_s == float("inf") for f in late)  # requests answered back to back
+    assert sum(on_time(f, 0.05) for f in sent) >= 250
 
 
 def test_text_lost_digits_are_the_limit_of_a_format_without_checksum(tmp_path):
