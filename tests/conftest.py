@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 import fetch_data
@@ -19,9 +20,25 @@ def _locate_or_exit(config: pytest.Config) -> dict[str, Path]:
         try:
             found = fetch_data.locate()
         except fetch_data.DataError as exc:
-            pytest.exit(f"\n{exc}", returncode=pytest.ExitCode.USAGE_ERROR)
+            tr = config.pluginmanager.get_plugin("terminalreporter")
+            if tr is not None:
+                tr.write_line("")
+                tr.write_line(str(exc), red=True, bold=True)
+            else:
+                print(exc, file=sys.stderr)
+            pytest.exit("the real recordings are missing or differ (see above)",
+                        returncode=pytest.ExitCode.USAGE_ERROR)
         config.stash[_FOUND] = found
     return found
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """With pytest-xdist (``-n``), check in the controller, before any worker starts: a worker
+    cannot stop the run cleanly (the controller does not collect, so this is done whether or
+    not the chosen tests read the recordings)."""
+    config = session.config
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        _locate_or_exit(config)
 
 
 def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config,

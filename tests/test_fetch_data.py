@@ -3,6 +3,7 @@ differences, and one message (not an error per test) when the files cannot be ha
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shutil
@@ -193,6 +194,11 @@ def test_a_run_without_the_files_stops_at_once_with_one_message(tmp_path):
     assert "make data" in out and "TRIAXCAL_REALDATA" in out
     assert " passed" not in out and " error" not in out.lower().replace("connectionerror", "")
     assert elapsed < 60
+    if importlib.util.find_spec("xdist") is not None:  # with workers: the same one message
+        par = run("-n", "2", "tests")
+        out = par.stdout + par.stderr
+        assert par.returncode == pytest.ExitCode.USAGE_ERROR, out
+        assert out.count("could not be downloaded") == 1 and "INTERNALERROR" not in out, out
     # the tests that need no recordings run without them
     plain = run("tests/test_plain.py")
     assert plain.returncode == 0 and "1 passed" in plain.stdout, plain.stdout + plain.stderr
