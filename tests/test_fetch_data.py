@@ -160,6 +160,7 @@ def test_a_cached_download_that_differs_is_fetched_again(tmp_path, monkeypatch):
         server.server_close()
 
 
+@pytest.mark.slow
 def test_a_run_without_the_files_stops_at_once_with_one_message(tmp_path):
     """A checkout with no local copy and no network: pytest stops before the first test with
     one message, however many tests need the files; tests that need none still run alone."""

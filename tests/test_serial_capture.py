@@ -562,6 +562,7 @@ def _no_leftover_threads():
 QEMU_TOOLS = [t for t in ("avr-gcc", "qemu-system-avr", "make") if shutil.which(t) is None]
 
 
+@pytest.mark.slow
 @pytest.mark.qemu
 @pytest.mark.skipif(bool(QEMU_TOOLS), reason=f"{QEMU_TOOLS} not found: run `make deps`")
 def test_capture_from_the_emulated_avr_firmware(tmp_path, capsys):
