@@ -46,6 +46,7 @@ install: $(PY_DEP)
 # The real recordings the tests read (tests/data/registry.txt): checked, and downloaded into the
 # cache when neither kept in tests/data nor in a local copy (TRIAXCAL_REALDATA, ../shared/realdata).
 data: $(PY_DEP)
+	@$(PY) -c "import pooch" 2>/dev/null || $(PY) -m pip install -q 'pooch>=1.6'
 	$(PY) tests/fetch_data.py
 
 test-rust:
