@@ -17,12 +17,14 @@ endif
 # .venv is made only when PY is its Python
 PY_DEP := $(filter $(VENV)/bin/python,$(PY))
 
-APT_PACKAGES := gcc python3-venv gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium chromium-driver valgrind
+APT_PACKAGES := gcc python3-venv gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium \
+                chromium-driver valgrind gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
 
-.PHONY: deps install data test test-rust test-python lint stubs bench bench-instructions instructions-guard demo wheel wheel-check
+.PHONY: deps install data test test-rust test-python lint stubs bench bench-instructions instructions-guard demo wheel wheel-check firmware-check
 
-# Debian packages the tests need (a C compiler and venv for the build; the AVR firmware build, its QEMU run, the Arduino sketch
-# built against the Arduino AVR core; the headless browser of the live page's tests; valgrind
+# Debian packages the tests need (a C compiler and venv for the build; the AVR firmware build,
+# its QEMU run, the Arduino sketch built against the Arduino AVR core; the firmware library's
+# Cortex-M3 build and QEMU run; the headless browser of the live page's tests; valgrind
 # for the instruction counts). Skipped when everything is present already; needs root (as on
 # CI) otherwise.
 deps:
@@ -72,8 +74,13 @@ wheel:
 wheel-check: wheel
 	PYTHON=$(PY) bash scripts/check_wheel.sh dist
 
+# The firmware's C library against the core's test vectors: host, ATmega328P and Cortex-M3
+# (QEMU).
+firmware-check:
+	$(MAKE) -C firmware check
+
 # Everything: the README's test command, and what CI runs.
-test: deps install data test-rust lint test-python instructions-guard wheel-check
+test: deps install data test-rust lint test-python firmware-check instructions-guard wheel-check
 
 bench:
 	$(PY) benches/bench_fit.py

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import triaxcal as tc
 import triaxcal.io.akm as akm
+from triaxcal.calibration.parts import fold_asa
 from triaxcal.cli import main
 from triaxcal.io.akm import apply_asa, asa_factors
-from triaxcal.parts import fold_asa
 
 ASA = (176, 177, 165)  # the fuse-ROM bytes of an AK8963: k = 1.1875, 1.1914, 1.1445
 

@@ -9,14 +9,15 @@ from collections import Counter
 import numpy as np
 import pytest
 from _boards import FAULTS, WINDOW, make_board, production_run, write_session
-from triaxcal import Calibration
+from triaxcal import Calibration, PoseSettings
+from triaxcal.calibration.request import SourceOptions
 from triaxcal.cli import main
 from triaxcal.errors import CalibrationError
 from triaxcal.fleet.batch import (
     SUMMARY_COLUMNS,
     Limits,
     batch_fit,
-    fit_options,
+    batch_request,
     read_grouped_table,
 )
 
@@ -163,7 +164,8 @@ def test_library_call_in_process():
 
     t = Table(names=("ax", "ay", "az"), data=counts.astype(float), path=__import__(
         "pathlib").Path("mem"), sha256="0" * 64)
-    res = batch_fit([("a", t)], args=fit_options(window=WINDOW), limits=Limits(), jobs=1)
+    req = batch_request(source=SourceOptions(poses=True, detection=PoseSettings(window=WINDOW)))
+    res = batch_fit([("a", t)], request=req, limits=Limits(), jobs=1)
     assert res[0].passed and res[0].part is not None and res[0].outputs == ()
     with pytest.raises(CalibrationError):
         Limits(offset_max=float("nan"))

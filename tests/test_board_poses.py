@@ -19,7 +19,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from triaxcal import CalibrationError
+from triaxcal.capture.run import read_session
 from triaxcal.cli import main
+from triaxcal.detect.session import POSE_N_COLUMN
 from triaxcal.io.board_poses import (
     MODE_BYTE,
     BoardPoseDecoder,
@@ -29,9 +31,7 @@ from triaxcal.io.board_poses import (
     encode_settings_frame,
     encode_status_frame,
 )
-from triaxcal.io.capture import read_session
 from triaxcal.io.protocol import FramedDecoder, crc16_ccitt, encode_framed
-from triaxcal.poses import POSE_N_COLUMN
 
 K = 7
 

@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 from triaxcal import sim
+from triaxcal.capture.run import read_session
 from triaxcal.cli import main
-from triaxcal.io.capture import read_session
 
 
 @pytest.fixture(scope="module")
@@ -119,11 +119,16 @@ def test_capture_and_demo_count_the_84_poses_and_cover_the_sphere(demo):
     assert res["capture"]["poses_online"] == res["poses"] == 84
     assert res["capture"]["coverage_pct"] == res["coverage_pct"] == 100.0
     # the demo detected with nothing but the command line's defaults
-    from triaxcal.session.pose_options import default_settings
+    import argparse
 
+    from triaxcal.cli._pose_options import add_pose_options, settings_from_args
+
+    p = argparse.ArgumentParser()
+    add_pose_options(p)
+    defaults = settings_from_args(p.parse_args([]))
     d = res["pose_detection"]
     assert {k: v for k, v in d.items() if k != "counts_per_g"} == {
-        k: v for k, v in default_settings().to_dict().items() if k != "counts_per_g"}
+        k: v for k, v in defaults.to_dict().items() if k != "counts_per_g"}
     assert set(res["thresholds"]) == {"accel", "gyro", "mag"}
 
 

@@ -19,8 +19,10 @@ import numpy as np
 import pytest
 from triaxcal import CalibrationError
 from triaxcal.calibration import Calibration
+from triaxcal.capture.run import SessionWriter, capture, channel_names
 from triaxcal.cli import main
-from triaxcal.io.capture import SessionWriter, capture, channel_names
+from triaxcal.detect.session import session_poses
+from triaxcal.fit.select import fit_robust
 from triaxcal.io.serial import Record, SerialReader
 from triaxcal.live import (
     MOTIONCAL_LIMITS,
@@ -32,8 +34,6 @@ from triaxcal.live import (
 )
 from triaxcal.live.quality import motioncal_regions
 from triaxcal.live.server import LiveServer
-from triaxcal.poses import session_poses
-from triaxcal.select import fit_robust
 from triaxcal.sim import SimDevice, SimIMU, globe_script
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -391,8 +391,12 @@ def test_send_goes_over_the_open_port_with_the_echo_check(tmp_path):
     imu = SimIMU(4)
     with SimDevice(imu, globe_script(hold_s=0.6, seed=4), speed=30, loop=True, seed=4) as dev:
         reader = SerialReader(dev.port, protocol="framed", channels=10)
+        from triaxcal.sim import SIM_COUNTS_PER_UNIT
+
+        # the packet is in m/s^2 and uT: the board driver's scale is given (none is assumed)
         st = LiveState(tmp_path / "s.csv", NAMES, port=dev.port,
-                       options=LiveOptions(out_dir=tmp_path, send_timeout_s=15.0))
+                       options=LiveOptions(out_dir=tmp_path, send_timeout_s=15.0,
+                                           counts_per_unit=SIM_COUNTS_PER_UNIT))
         st.attach(reader)
         stop = threading.Event()
         th = threading.Thread(target=capture, args=(reader, tmp_path / "s.csv"), kwargs={
@@ -417,7 +421,8 @@ def test_send_goes_over_the_open_port_with_the_echo_check(tmp_path):
             saved = Calibration.load(tmp_path / "calibration.json")
             from triaxcal.export import decode_motioncal, motioncal_packet
 
-            assert dev.motioncal == decode_motioncal(motioncal_packet(saved, offsets_only=True))
+            assert dev.motioncal == decode_motioncal(motioncal_packet(
+                saved, offsets_only=True, counts_per_unit=SIM_COUNTS_PER_UNIT))
         finally:
             stop.set()
             dev.silence(10.0)  # a streaming capture stops once the line goes quiet

@@ -10,13 +10,13 @@ import time
 import numpy as np
 import pytest
 from triaxcal import sim
-from triaxcal.cli import main
-from triaxcal.io.multicapture import (
+from triaxcal.capture.multi import (
     capture_many,
     parse_id_reply,
     port_label,
     query_serial_number,
 )
+from triaxcal.cli import main
 
 RATE, SPEED = 100.0, 4.0
 

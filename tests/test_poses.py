@@ -8,9 +8,15 @@ import doctest
 import numpy as np
 import pytest
 import triaxcal as tc
-import triaxcal.poses as poses_mod
-from triaxcal.poses import HEAD_ROWS, PoseSettings, sensor_columns, session_poses
-from triaxcal.session.pose_options import add_pose_options, settings_from_args, stored_settings
+import triaxcal.detect.session as poses_mod
+from triaxcal.cli._pose_options import add_pose_options, settings_from_args
+from triaxcal.detect.session import (
+    HEAD_ROWS,
+    PoseSettings,
+    sensor_columns,
+    session_poses,
+    stored_settings,
+)
 
 NAMES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp")
 
@@ -136,8 +142,8 @@ def test_docstrings_run():
 def test_capture_with_poses_84_stops_by_itself_and_fit_agrees(tmp_path, capsys):
     # `triaxcal capture --poses 84` on the globe scheme ends by itself (it stopped at 63 when
     # only the accelerometer ended a pose), and `fit --poses` on the file finds the same poses
+    from triaxcal.capture.run import capture
     from triaxcal.cli import main
-    from triaxcal.io.capture import capture
     from triaxcal.io.serial import SerialReader
 
     imu = tc.sim.SimIMU(1)

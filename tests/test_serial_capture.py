@@ -16,16 +16,14 @@ import numpy as np
 import pytest
 import serial
 from triaxcal import sim
-from triaxcal.cli import main
-from triaxcal.errors import CalibrationError
-from triaxcal.io.capture import (
+from triaxcal.capture.run import (
     SessionWriter,
     capture,
     channel_names,
-    coverage,
     read_session,
-    suggest_turn,
 )
+from triaxcal.cli import main
+from triaxcal.errors import CalibrationError
 from triaxcal.io.motioncal import encode_motioncal, parse_motioncal_echo
 from triaxcal.io.serial import (
     CaptureError,
@@ -36,6 +34,7 @@ from triaxcal.io.serial import (
     SilentDeviceError,
     parse_request_byte,
 )
+from triaxcal.quality.coverage import coverage, suggest_turn
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -517,9 +516,9 @@ def test_session_writer_modes(tmp_path):
 
 def test_coverage_and_suggestions():
     rec = sim.SimIMU(1).record(sim.globe_script(hold_s=0.5), rate_hz=50)
-    assert coverage(rec.pose_means("accel")) == 1.0
+    assert coverage(rec.pose_means("accel")).fraction == 1.0
     six = sim.SimIMU(1).record(sim.six_face_script(hold_s=0.5), rate_hz=50)
-    assert coverage(six.pose_means("accel")) == pytest.approx(6 / 24)
+    assert coverage(six.pose_means("accel")).fraction == pytest.approx(6 / 24)
     assert "every direction covered" in suggest_turn(rec.pose_means("accel"))
     assert suggest_turn([[0, 0, 1.0]]).startswith("turn it upside down")
     s = suggest_turn([[0, 0, 1.0], [0, 0, -1.0]], [0, 0, 1.0])

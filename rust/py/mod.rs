@@ -5,6 +5,7 @@
 //! and builds the `EllipsoidFit`, for the sake of small calls.
 
 mod allan;
+mod bounds;
 mod errors;
 mod fit;
 
@@ -20,7 +21,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 /// Borrows an (N, 3) aligned, C-contiguous float64 array as points, without copying. (The
-/// Python facade converts anything else first: `triaxcal._validate.as_points`.)
+/// Python facade converts anything else first: `triaxcal._checks.arrays.as_points`.)
 fn points<'a>(arr: &'a PyReadonlyArray2<'_, f64>) -> PyResult<&'a [[f64; 3]]> {
     let shape = arr.shape();
     if shape[1] != 3 {
@@ -254,5 +255,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_batch, m)?)?;
     m.add_function(wrap_pyfunction!(apply, m)?)?;
     m.add_class::<allan::AllanStream>()?;
+    bounds::add(m)?;
     Ok(())
 }

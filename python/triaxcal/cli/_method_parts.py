@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import SensorCalibration
+from ..calibration.part import SensorCalibration
 
 #: Parts whose readings do not lie on a sphere: reported by their stored numbers.
 SUMMARY_METHODS = ("gyro-gains", "temperature")

@@ -6,9 +6,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..capture.multi import capture_many
+from ..capture.run import channel_names
 from ..errors import CalibrationError
-from ..io.capture import channel_names
-from ..io.multicapture import capture_many
 
 
 def run_many(args: argparse.Namespace, channels: int | None) -> int:

@@ -35,7 +35,7 @@ def _limits_help() -> str:
 
 
 def register(subparsers: Any) -> None:
-    from ..session.fit import add_fit_options
+    from ._fit_options import add_fit_options
 
     p = subparsers.add_parser(
         "batch", help=HELP, description=__doc__,
@@ -90,13 +90,13 @@ def _sources(args: argparse.Namespace) -> list[tuple[str, Any]]:
 
 def run(args: argparse.Namespace) -> int:
     from ..fleet.batch import Limits, batch_fit, load_limits, print_counts
+    from ._fit_options import fit_request
 
     limits = load_limits(args.limits) if args.limits else Limits()
     limits = Limits.from_items(args.limit, base=limits)
-    if args.rounds < 0:
-        raise CalibrationError("--rounds must be >= 0")
+    request = fit_request(args)
     sources = _sources(args)
-    results = batch_fit(sources, args=args, limits=limits, out_dir=args.output,
+    results = batch_fit(sources, request=request, limits=limits, out_dir=args.output,
                         prefix=args.prefix, jobs=args.jobs,
                         progress=None if args.quiet else sys.stderr)
     for r in results:

@@ -6,13 +6,13 @@ import argparse
 import sys
 from typing import Any
 
+from ..capture.run import capture, channel_names
+from ..detect.session import POSE_N_COLUMN
 from ..errors import CalibrationError
 from ..io.board_poses import BoardPoseSettings
-from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
-from ..poses import POSE_N_COLUMN
-from ..session.pose_options import add_pose_options, positive_int, settings_from_args
+from ._pose_options import add_pose_options, positive_int, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 
@@ -142,6 +142,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no status line")
     add_pose_options(p)
     add_live_options(p)
+    from .export import add_scale_options
+
+    add_scale_options(p.add_argument_group(
+        "live page's Send: the board driver's scale (the MotionCal packet is in m/s^2, rad/s, "
+        "uT)"))
     p.set_defaults(func=run)
 
 
@@ -242,7 +247,7 @@ def run(args: argparse.Namespace) -> int:
 
         result = live_capture(
             reader, args.out, columns=names, mode=mode, detection=detection,
-            options=LiveOptions(detection=detection),
+            options=LiveOptions(detection=detection, **_live_scale(args)),
             host=args.http_host, port=args.http_port, open_browser=not args.no_browser,
             progress=None if args.quiet else out, notices=out, **kwargs)
     else:
@@ -261,3 +266,12 @@ def run(args: argparse.Namespace) -> int:
         file=out,
     )
     return 0
+
+
+def _live_scale(args: argparse.Namespace) -> dict[str, Any]:
+    from .export import scale_options
+
+    d = scale_options(args)
+    if "sensor_model" in d:
+        d["sensor_model"] = tuple(d["sensor_model"])
+    return d

@@ -1,14 +1,14 @@
 """``triaxcal demo``: capture from a simulated board, fit, and compare with the truth.
 
 The simulated board (:class:`triaxcal.sim.SimDevice`) runs on a pseudo-terminal, and the
-capture goes through exactly the code a real board uses (:func:`triaxcal.io.capture.capture`
+capture goes through exactly the code a real board uses (:func:`triaxcal.capture.run.capture`
 over :class:`triaxcal.io.serial.SerialReader`). The session CSV is then read back, still
-poses are detected as ``triaxcal fit --poses`` detects them (:func:`triaxcal.poses.session_poses`
-with the pose options of the command line: nothing else), the accelerometer and magnetometer
-are fitted (:func:`triaxcal.fit_ellipsoid`, model "full") and the gyroscope bias is averaged
-over the still poses. Finally the calibration is written as a calibration file, C headers (float and
-fixed point), the MotionCal packet, and a quality report with a figure per sensor
-(:func:`triaxcal.export.write_outputs`).
+poses are detected as ``triaxcal fit --poses`` detects them
+(:func:`triaxcal.detect.session.session_poses` with the pose options of the command line:
+nothing else), the accelerometer and magnetometer are fitted (:func:`triaxcal.fit_ellipsoid`, model
+"full") and the gyroscope bias is averaged over the still poses. Finally the calibration is written
+as a calibration file, C headers (float and fixed point), the MotionCal packet, and a quality
+report with a figure per sensor (:func:`triaxcal.export.write_outputs`).
 """
 
 from __future__ import annotations
@@ -24,17 +24,18 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
-from ..coverage import coverage, coverage_warning
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..capture.run import CaptureResult, capture, channel_names, read_session
+from ..detect.session import PoseSettings, session_poses
 from ..errors import CalibrationError
 from ..export import write_outputs
-from ..fit import EllipsoidFit, fit_ellipsoid
-from ..io.capture import CaptureResult, capture, channel_names, read_session
+from ..fit.ellipsoid import EllipsoidFit, fit_ellipsoid
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader
-from ..poses import PoseSettings, session_poses
-from ..session.pose_options import add_pose_options, default_settings, settings_from_args
+from ..quality.coverage import coverage, coverage_warning
 from ..sim import GYRO_COUNTS_PER_DPS, Script, SensorTruth, SimDevice, SimIMU, globe_script
+from ._pose_options import add_pose_options, settings_from_args
 from .capture import add_live_options
 
 HELP = "capture from a simulated board, calibrate it, and compare with the truth"
@@ -135,7 +136,7 @@ def run_demo(
     buttons write into ``out/live``); the page, still serving, is returned as
     ``results["live_page"]``: close it when done.
     """
-    settings = detection if detection is not None else default_settings()
+    settings = detection if detection is not None else PoseSettings()
     t_start = time.monotonic()
     imu = SimIMU(seed)
     script = globe_script(hold_s=1.0, seed=seed)
@@ -156,10 +157,12 @@ def run_demo(
         if live is not None:
             from ..live import LiveOptions
             from ..live.run import LivePage
+            from ..sim import SIM_COUNTS_PER_UNIT
 
             page = LivePage(reader, session, columns=channel_names(protocol, channels),
                             options=LiveOptions(mag_radius=f"{imu.truth.field_ut:g}uT",
-                                                out_dir=out / "live", detection=settings),
+                                                out_dir=out / "live", detection=settings,
+                                                counts_per_unit=SIM_COUNTS_PER_UNIT),
                             host=live["host"], port=live["port"],
                             open_browser=live["open_browser"], progress=progress,
                             mode="overwrite").start()
@@ -292,8 +295,11 @@ def _analyse(out: Path, session: Path, protocol: str, speed: float, seed: int, p
         mag=part(mag_fit, m_cols, "uT"),
         sensor_id=f"triaxcal-sim-seed{seed}",
     )
+    from ..sim import SIM_COUNTS_PER_UNIT
+
     outputs = write_outputs(
-        cal, {"accel": means[:, a_cols], "mag": means[:, m_cols]}, out, plot=plot
+        cal, {"accel": means[:, a_cols], "mag": means[:, m_cols]}, out, plot=plot,
+        counts_per_unit=SIM_COUNTS_PER_UNIT,  # the simulated board's driver scale
     )
     results["outputs"] = {k: str(v) for k, v in outputs.items()}
     path = out / "results.json"

@@ -1,6 +1,6 @@
 """``triaxcal diff OLD.json NEW.json`` (or ``triaxcal diff CAL.json``: the calibration against
 the one it replaced): per coefficient the change, the change in standard errors, and a verdict
--- the same calibration, a real change, or a suspicious one (see :mod:`triaxcal.compare`).
+-- the same calibration, a real change, or a suspicious one (see :mod:`triaxcal.calibration.diff`).
 
 Exit code, for production scripts: 0 when every change is within ``--threshold`` standard
 errors, 3 for a real change, 4 for a suspicious one (1 for an error such as a missing file).
@@ -13,8 +13,8 @@ import json
 import sys
 from typing import Any
 
-from ..calibration import SENSORS, Calibration
-from ..compare import compare, compare_with_previous
+from ..calibration.diff import compare, compare_with_previous
+from ..calibration.file import SENSORS, Calibration
 
 
 def register(subparsers: Any) -> None:

@@ -21,10 +21,10 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_gyro_gains
 from ..errors import CalibrationError
 from ..io.tables import pick_columns, read_table
 from ..methods.gyro import gyro_gains
-from ..parts import part_from_gyro_gains
 from ._calfile import add_output_options, file_sha256, save_part
 
 HELP = "gyroscope gains from turns of a known angle, both ways about each axis (the seed's)"
@@ -133,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     for w in warnings:
         print(f"warning: {w}", file=out)
     part = part_from_gyro_gains(res, raw_unit=u, stats={"rate_hz": rate, "warnings": warnings},
-                                source=str(table.path), input_sha256=file_sha256(table.path))
+                                source=str(table.path), input_sha256=file_sha256(table.path),
+                                force=args.force)
     verb = save_part(args, "gyro", part)
     print(f"{verb} {args.output}: gyro ({u} -> deg/s, gains from turns of {res.angle_deg:g} deg)",
           file=out)

@@ -29,14 +29,14 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration
+from ..calibration.file import Calibration
+from ..conventions.units import UNITS
 from ..errors import CalibrationError
 from ..io.logs import is_log, read_log
 from ..io.tables import SENSOR_COLUMNS
 from ..methods.allan import AllanAccumulator
 from ..methods.noise import NoiseFigures, kalibr_noise, kalibr_yaml, noise_figures, plot_allan
-from ..session.source import add_source_options
-from ..units import UNITS
+from ._fit_options import add_source_options
 
 #: Rows parsed at a time.
 CHUNK_ROWS = 200_000

@@ -13,21 +13,23 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..calibration.session import fit_session
+from ..calibration.source import load_source
+from ..detect.session import pose_points, stored_settings
 from ..errors import CalibrationError
-from ..fit import MODELS
+from ..fit.ellipsoid import MODELS
 from ..io.files import check_output, write_file
 from ..io.logs import is_log
 from ..io.tables import pick_columns, read_table
-from ..poses import pose_points
 from ..report import QualityReport, context_lines, plot_report, quality_report
-from ..session.fit import add_fit_options, fit_file
-from ..session.pose_options import apply_settings, stored_settings
-from ..session.source import load_source
 from ._calfile import file_sha256
+from ._fit_options import add_fit_options, fit_request
 from ._method_parts import summary_only, summary_text, tilt_points
 
 
@@ -99,16 +101,19 @@ def _log_report(src: Path, part: SensorCalibration, sensor: str,
     """Report ``part`` on the log it was fitted from, read with the options it was read with
     (``stats["log"]``) unless given again on the command line."""
     log = part.stats.get("log") or {}
-    same = argparse.Namespace(**vars(args))
-    if same.instance is None:
-        same.instance = log.get("instance")
-    if not same.topic and log.get("topic"):
-        same.topic = list(log["topic"])
-    same.undo_autopilot_cal = args.undo_autopilot_cal or bool(log.get("undo_autopilot_cal"))
-    same.poses = bool(part.stats.get("poses")) or args.poses
-    if part.stats.get("poses"):  # the poses it was fitted on, found with its stored settings
-        apply_settings(same, stored_settings(part.stats))
-    data = load_source(src, sensor, same)
+    given = fit_request(args, sensor=sensor).source
+    topics = given.topics or (tuple(log["topic"]) if log.get("topic") else None)
+    options = replace(
+        given,
+        instance=given.instance if given.instance is not None else log.get("instance"),
+        topics=topics,
+        undo_autopilot_cal=given.undo_autopilot_cal or bool(log.get("undo_autopilot_cal")),
+        poses=bool(part.stats.get("poses")) or given.poses,
+        # the poses it was fitted on, found with its stored settings
+        detection=(stored_settings(part.stats) if part.stats.get("poses")
+                   else given.detection),
+    )
+    data = load_source(src, sensor, options)
     if args.data_file is None and part.input_sha256 not in (None, data.sha256):
         raise CalibrationError(
             f"{src} has changed since the calibration was made (SHA-256 differs): pass "
@@ -204,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
                                   report=rep)
                 print(f"  figure: {out}")
     else:
-        res = fit_file(args)
+        res = fit_session(args.data, fit_request(args))
         for n in res.notes:
             print(f"  {n}", file=sys.stderr)
         rep = quality_report(res.points, res.part, sensor=res.sensor,

@@ -26,14 +26,14 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_center
+from ..calibration.request import parse_radius
+from ..detect.session import pose_points
 from ..errors import CalibrationError
-from ..fit import descend_center, fit_sphere, grid_center, sphere_error
+from ..fit.ellipsoid import descend_center, fit_sphere, grid_center, sphere_error
 from ..io.tables import pick_columns, read_table
-from ..parts import part_from_center
-from ..poses import pose_points
-from ..session.fit import parse_radius
-from ..session.pose_options import add_pose_options, settings_from_args
 from ._calfile import add_output_options, file_sha256, save_part
+from ._pose_options import add_pose_options, settings_from_args
 
 HELP = "zero offset as the centre of a sphere of known radius (the seed's descent)"
 
@@ -185,7 +185,8 @@ def run(args: argparse.Namespace) -> int:
     part = part_from_center(c, r, raw_unit=args.raw_unit, method=args.method,
                             unit=None if scale is None else scale[1],
                             scale_to=None if scale is None else scale[0], stats=stats,
-                            source=str(table.path), input_sha256=file_sha256(table.path))
+                            source=str(table.path), input_sha256=file_sha256(table.path),
+                                force=args.force)
     verb = save_part(args, args.sensor, part)
     u = args.raw_unit
     mean = pts.mean(axis=0)

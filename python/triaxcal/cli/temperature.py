@@ -24,13 +24,13 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_temperature
+from ..detect.session import session_poses
 from ..errors import CalibrationError
 from ..io.tables import pick_columns, read_table
 from ..methods.temperature import fit_temperature
-from ..parts import part_from_temperature
-from ..poses import session_poses
-from ..session.pose_options import add_pose_options, settings_from_args
 from ._calfile import add_output_options, existing_part, file_sha256, save_part
+from ._pose_options import add_pose_options, settings_from_args
 
 HELP = "gyro bias against temperature (the seed's linear trend; degree 1 to 3)"
 
@@ -130,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
     base = existing_part(args.output, args.sensor, args.new)
     part = part_from_temperature(model, base, raw_unit=args.raw_unit,
                                  stats={"temperature_column": how, "rows_used": len(rows)},
-                                 source=str(table.path), input_sha256=file_sha256(table.path))
+                                 source=str(table.path), input_sha256=file_sha256(table.path),
+                                force=args.force)
     u = args.raw_unit
     out = sys.stdout
     print(f"{args.sensor} bias against temperature, degree {model.degree}, from {used}; "

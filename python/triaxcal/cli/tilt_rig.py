@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_tilt_rig
 from ..errors import CalibrationError
 from ..methods.static import TILT_KEYS, tilt_rig
-from ..parts import part_from_tilt_rig
 from ._calfile import add_output_options, file_sha256, save_part
 
 HELP = "accelerometer offsets and gains from a rig tilted by a known angle (the seed's rig)"
@@ -191,7 +191,8 @@ def run(args: argparse.Namespace) -> int:
               f"the rig's angle (or pass --angle {mean_imp:.2f} if the gains are known to be "
               "equal)", file=out)
     part = part_from_tilt_rig(rig, raw_unit=u, stats={"n": n, "columns": cols, **extra},
-                              source=str(args.data), input_sha256=file_sha256(args.data))
+                              source=str(args.data), input_sha256=file_sha256(args.data),
+                                force=args.force)
     everything = np.vstack(list(readings.values()))
     norms = np.linalg.norm(part.apply(everything), axis=1)
     print(f"  check: calibrated |a| of the {n} readings {norms.min():.5f} .. {norms.max():.5f} g",

@@ -49,26 +49,20 @@ from ._segmenter import (
     Rejection,
 )
 from .poses import PoseDetector, detect_poses
+from .session import PoseSettings, session_poses
 from .still import StillDetection, detect_still, still_intervals
 
+#: The public names (``triaxcal.__all__`` gathers them); the detector's tuning constants above
+#: stay importable from here.
 __all__ = [
-    "BIAS_WINDOWS",
-    "NOISE_MIN_WINDOWS",
-    "NOISE_WINDOWS",
-    "NOISE_Z",
-    "REANCHOR_MAX",
-    "REANCHOR_WINDOWS",
-    "TOO_CLOSE",
-    "TOO_NOISY",
-    "TOO_SHORT",
-    "NOISE_WINDOWS",
-    "NOISE_Z",
     "Pose",
     "PoseDetection",
     "PoseDetector",
+    "PoseSettings",
     "Rejection",
     "StillDetection",
     "detect_poses",
     "detect_still",
+    "session_poses",
     "still_intervals",
 ]

@@ -50,6 +50,8 @@ __all__ = [
 MODE_BYTE = b"S"
 
 FRAME_POSE, FRAME_STATUS, FRAME_SETTINGS = 0x50, 0x57, 0x43  # 'P', 'W', 'C'
+# the board's own fit and stored calibration after the last pose (triaxcal.io.board_store)
+_CALIBRATION_FRAMES = (0x51, 0x4B)  # 'Q', 'K'
 _SETTINGS = struct.Struct("<BBBHHHB")  # the 10 settings bytes
 _STATUS = struct.Struct("<BBH3h3h")  # 16 bytes after the type byte
 _SETTINGS_VERSION = 1
@@ -356,6 +358,8 @@ class BoardPoseDecoder(FramedDecoder):
                 return bad
             self.settings_accepted = bool(body[0])
             self.heartbeats += 1
+        elif kind in _CALIBRATION_FRAMES:
+            self.heartbeats += 1  # intact, for board_store's decoder: no pose, not dropped
         else:
             return bad
         if self.stats.last_seq is not None:

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import SensorCalibration
+from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
 
 __all__ = ["WearableRecording", "geneactiv_header", "read_geneactiv_pages", "read_wearable"]

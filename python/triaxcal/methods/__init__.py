@@ -15,6 +15,9 @@
   vertical, the vertical part from the World Magnetic Model).
 * :mod:`~triaxcal.methods.alignment` -- magnetometer-to-accelerometer alignment, mounting
   rotation, dip angle, tilt-compensated heading.
+* :mod:`~triaxcal.methods.field` -- the Earth's field from the World Magnetic Model.
+* :mod:`~triaxcal.methods.autocal` -- free-living auto-calibration of wearable accelerometers
+  (van Hees et al. 2014), streamed over recordings larger than memory.
 """
 
 from .alignment import (
@@ -25,7 +28,9 @@ from .alignment import (
     heading_errors,
 )
 from .allan import AllanAccumulator, AllanDeviation, allan
+from .autocal import AutoCalibration, autocalibrate
 from .bootstrap import BootstrapIntervals, bootstrap
+from .field import ExpectedField, expected_field
 from .gyro import (
     GyroBias,
     GyroGains,
@@ -50,6 +55,10 @@ from .temperature import TemperatureModel, TemperatureRangeWarning, fit_temperat
 from .yaw import YawCalibration, fit_yaw
 
 __all__ = [
+    "AutoCalibration",
+    "ExpectedField",
+    "autocalibrate",
+    "expected_field",
     "AllanAccumulator",
     "AllanDeviation",
     "AxisNoise",

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
-from .._validate import as_samples
+from .._checks import options as opt
+from .._checks.arrays import as_samples
 from ..detect import Rejection, detect_poses, detect_still
 from ..errors import CalibrationError
 

@@ -44,8 +44,8 @@ from typing import Any
 
 import numpy as np
 
+from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
-from ..units import UNITS, unit_factor
 from .allan import AllanDeviation, allan
 
 __all__ = [

@@ -44,8 +44,8 @@ from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
-from .._validate import as_samples
+from .._checks import options as opt
+from .._checks.arrays import as_samples
 from ..errors import CalibrationError
 from .imu import TriadCalibration
 

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 #: each byte switches to.
 MODE_BYTES = {b"P": None, b"B": "binary", b"F": "framed", b"T": "text", b"R": "raw"}
 #: The identify command: the board answers ``ID:<serial number>\r\n`` (see
-#: :func:`triaxcal.io.multicapture.query_serial_number`).
+#: :func:`triaxcal.capture.multi.query_serial_number`).
 ID_BYTE = b"I"
 _MODE_OF = {None: "P", "binary": "B", "framed": "F", "text": "T", "raw": "R"}
 

@@ -1,0 +1,295 @@
+"""A compass calibrated from a flight log (``triaxcal fit LOG --sensor mag --method attitude``):
+the log's compass paired with its attitude, battery current or throttle and position, the
+autopilot's calibration undone, :func:`triaxcal.methods.attitude.fit_attitude`, and the part
+with what the flight determined, checked on the half of the flight it was not fitted to.
+
+* **Raw readings.** The calibration the autopilot applied is undone with its own equation
+  (:mod:`triaxcal.io.logs.autopilot`); a log whose calibration cannot be undone is refused.
+  ArduPilot corrects the compass in the body frame (it rotates first), PX4 in the sensor frame
+  (it rotates after): the fit runs in the body frame, and a PX4 part is turned back into the
+  sensor frame (``S = R^T M R``, ``offset = R^T o``, interference ``R^T v``), so that each
+  part is in the frame its autopilot corrects in.
+* **The field.** The World Magnetic Model's at the log's position (GPS fix, EKF origin) or the
+  request's ``field.location``; else fitted, with the overall scale held (see the method).
+* **Heading.** The attitude's yaw is used unless the autopilot took it from this compass
+  (ArduPilot ``COMPASS_USE`` on and the EKF's yaw from the compass; PX4 ``SYS_HAS_MAG`` /
+  ``EKF2_MAG_TYPE``): then only roll and pitch are (``heading="free"``), as MAGFit does.
+* **Interference.** The battery current when it varies by ``MIN_CURRENT_SPAN_A`` or more, else
+  the throttle when it varies by ``MIN_THROTTLE_SPAN``; otherwise none.
+* **Held-out check.** The same fit on the first half of the flight, judged on the second: the
+  scatter of the field turned to NED by the logged attitude and the heading error, with the
+  log's own calibration and with the fit (``stats["attitude"]["held_out"]``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..conventions.units import unit_factor
+from ..errors import CalibrationError
+from ..io.logs import read_log
+from ..io.logs.flight import FlightData, read_flight
+from ..io.recording import LogRecording
+from ..methods.attitude import AttitudeFit, fit_attitude, tilt_dcm
+from ..quality import bounds as B
+from .part import SensorCalibration, _norm_stats
+from .request import FitRequest
+from .source import file_sha256
+
+__all__ = ["MIN_CURRENT_SPAN_A", "MIN_THROTTLE_SPAN", "FlightSource", "fit_flight",
+           "flight_source", "ned_scatter"]
+
+#: Least range of the battery current (A) that makes a current interference term worth fitting.
+MIN_CURRENT_SPAN_A = 2.0
+#: Least range of the throttle (0..1) that makes a throttle interference term worth fitting.
+MIN_THROTTLE_SPAN = 0.2
+#: Heading error (deg RMS) between the log's corrected compass and the attitude's yaw below which
+#: the yaw followed this compass (when the parameters say it was fused): then only roll and pitch
+#: are used.
+YAW_FOLLOWED_DEG = 5.0
+
+
+@dataclass
+class FlightSource:
+    """A log's compass readings with what the fit needs at each one."""
+
+    path: Path
+    recording: LogRecording
+    flight: FlightData
+    t: np.ndarray             # s
+    raw: np.ndarray           # (N, 3) body frame, calibration undone, in ``unit``
+    logged: np.ndarray        # (N, 3) body frame as the autopilot corrected it
+    dcm: np.ndarray           # (N, 3, 3) body to NED
+    x: np.ndarray | None      # interference regressor
+    x_name: str | None
+    x_per: str | None         # "A" or "throttle"
+    unit: str
+    to_body: np.ndarray       # sensor (the autopilot's correction frame) to body
+    yaw_from_compass: bool
+    yaw_reason: str
+
+
+def _yaw_from_compass(rec: LogRecording, instance: int) -> tuple[bool, str]:
+    p = rec.params
+    if rec.format == "ardupilot-dataflash":
+        use = f"COMPASS_USE{'' if instance == 0 else instance + 1}"
+        if float(p.get(use, 1)) == 0:
+            return False, f"{use} = 0: the EKF did not use this compass"
+        src = p.get("EK3_SRC1_YAW")
+        if src is not None and float(src) in (2.0, 8.0) and float(p.get("AHRS_EKF_TYPE", 3)) == 3:
+            return False, f"EK3_SRC1_YAW = {float(src):g}: the yaw came from GPS, not the compass"
+        return True, f"{use} = 1: the autopilot's yaw came from this compass"
+    if float(p.get("SYS_HAS_MAG", 1)) == 0 or float(p.get("EKF2_MAG_TYPE", 0)) == 5:
+        return False, "SYS_HAS_MAG = 0 / EKF2_MAG_TYPE = 5: PX4 did not use the compass for yaw"
+    return True, "PX4 fused the magnetometer into its yaw (SYS_HAS_MAG, EKF2_MAG_TYPE)"
+
+
+def flight_source(path: str | Path, request: FitRequest) -> FlightSource:
+    """The compass readings of log ``path`` paired with attitude, current or throttle."""
+    p = Path(path)
+    instance = request.source.instance
+    try:
+        rec = read_log(p, instance=instance, undo_autopilot_cal=True)
+    except CalibrationError as exc:
+        raise CalibrationError(f"--method attitude fits the raw compass and needs the "
+                               f"autopilot's calibration undone, which fails here: {exc}") from None
+    logged_rec = read_log(p, instance=instance)
+    mag = rec.stream("mag")
+    flight = read_flight(p)
+    if flight.attitude is None:
+        raise CalibrationError(
+            f"{p} has no attitude (ArduPilot ATT, PX4 vehicle_attitude): a compass calibration "
+            "from the flight needs the vehicle's attitude at each compass reading; fit the "
+            "readings alone instead (--method ellipsoid)")
+    a = flight.attitude.t
+    keep = (mag.t >= a[0]) & (mag.t <= a[-1])
+    if keep.sum() < 30:
+        raise CalibrationError(f"{p}: only {int(keep.sum())} compass readings fall within the "
+                               "logged attitude's time span; at least 30 are needed")
+    t = mag.t[keep]
+    raw = mag.data[keep]
+    logged = logged_rec.stream("mag").data[keep]
+    to_body = np.eye(3)
+    if rec.autopilot is not None and rec.autopilot.mag is not None:
+        to_body = np.asarray(rec.autopilot.mag.rotation)
+    raw_body = raw @ to_body.T
+    x, x_name, x_per = None, None, None
+    cur, thr = flight.current, flight.throttle
+    if cur is not None:
+        xc = cur.at(t)
+        if np.ptp(xc) >= MIN_CURRENT_SPAN_A:
+            x, x_name, x_per = xc, cur.name, "A"
+    if x is None and thr is not None:
+        xt = thr.at(t)
+        if np.ptp(xt) >= MIN_THROTTLE_SPAN:
+            x, x_name, x_per = xt, thr.name, "throttle"
+    used, why = _yaw_from_compass(rec, instance or 0)
+    return FlightSource(path=p, recording=rec, flight=flight, t=t, raw=raw_body, logged=logged,
+                        dcm=flight.dcm(t), x=x, x_name=x_name, x_per=x_per, unit=mag.unit,
+                        to_body=to_body, yaw_from_compass=used, yaw_reason=why)
+
+
+def ned_scatter(calibrated: Any, dcm: Any) -> float:
+    """RMS distance of the calibrated readings turned to NED by the attitude from their mean:
+    the scatter a calibration leaves in the field, which should hold still."""
+    v = np.einsum("nij,nj->ni", np.asarray(dcm), np.asarray(calibrated))
+    return float(np.sqrt(((v - v.mean(axis=0)) ** 2).sum(axis=1).mean()))
+
+
+def heading_error_deg(calibrated: Any, dcm: Any, declination_deg: float | None) -> np.ndarray:
+    """Compass heading (tilt-compensated with the attitude's roll and pitch, plus the
+    declination) minus the attitude's yaw, wrapped to +-180 deg; without a declination the
+    circular mean is taken out."""
+    d = np.asarray(dcm)
+    h = np.einsum("nij,nj->ni", tilt_dcm(d), np.asarray(calibrated))
+    psi = np.arctan2(-h[:, 1], h[:, 0])
+    yaw = np.arctan2(d[:, 1, 0], d[:, 0, 0])
+    e = psi - yaw
+    if declination_deg is None:
+        e = e - math.atan2(np.sin(e).mean(), np.cos(e).mean())
+    else:
+        e = e + math.radians(declination_deg)
+    return np.degrees(np.angle(np.exp(1j * e)))
+
+
+def _field(request: FitRequest, src: FlightSource) -> tuple[np.ndarray | None, str, Any]:
+    """The Earth's field (NED, in the source's unit), where it came from, the ExpectedField."""
+    from ..methods.field import expected_field
+
+    loc = request.field.location
+    how = "--location"
+    if loc is None and src.flight.position is not None:
+        loc, how = src.flight.position, f"the log's {src.flight.position_source}"
+    if loc is None:
+        return None, "fitted (no position in the log and no --location)", None
+    ef = expected_field(*loc, date=request.field.date)
+    b = np.array(ef.vector_ned_ut()) * unit_factor("uT", src.unit)
+    return b, f"World Magnetic Model at {how}", ef
+
+
+def _fit(src: FlightSource, sel: np.ndarray, b: np.ndarray | None, heading: str,
+         soft: str) -> AttitudeFit:
+    x = None if src.x is None else src.x[sel]
+    return fit_attitude(src.raw[sel], src.dcm[sel], x=x, field_ned=b, heading=heading,
+                        soft_iron=soft)
+
+
+def _metrics(src: FlightSource, fit: AttitudeFit, sel: np.ndarray,
+             declination: float | None) -> dict[str, Any]:
+    x = None if src.x is None else src.x[sel]
+    after = fit.apply(src.raw[sel], x)
+    before = src.logged[sel] @ src.to_body.T
+    eb = heading_error_deg(before, src.dcm[sel], declination)
+    ea = heading_error_deg(after, src.dcm[sel], declination)
+    fb = np.linalg.norm(before - np.einsum("nji,j->ni", src.dcm[sel], fit.field_ned), axis=1)
+    fa = np.linalg.norm(after - np.einsum("nji,j->ni", src.dcm[sel], fit.field_ned), axis=1)
+    return {
+        "scatter_before": ned_scatter(before, src.dcm[sel]),
+        "scatter_after": ned_scatter(after, src.dcm[sel]),
+        "heading_rms_deg_before": float(np.sqrt((eb ** 2).mean())),
+        "heading_rms_deg_after": float(np.sqrt((ea ** 2).mean())),
+        "field_error_rms_before": float(np.sqrt((fb ** 2).mean())),
+        "field_error_rms_after": float(np.sqrt((fa ** 2).mean())),
+    }
+
+
+def fit_flight(path: str | Path, request: FitRequest) -> tuple[SensorCalibration, FlightSource]:
+    """The flight calibration of the compass in log ``path`` (module docstring), not yet judged
+    by the validity gate, and the source it was fitted on."""
+    if request.sensor != "mag":
+        raise CalibrationError("--method attitude calibrates the compass: use --sensor mag")
+    src = flight_source(path, request)
+    b, field_how, ef = _field(request, src)
+    n = len(src.t)
+    # the parameters say whether the yaw came from this compass; the data say whether it
+    # followed the compass as the log corrected it (heading error of a few degrees at most)
+    logged_err = heading_error_deg(src.logged @ src.to_body.T, src.dcm, None)
+    followed = float(np.sqrt((logged_err ** 2).mean())) <= YAW_FOLLOWED_DEG
+    heading = "free" if src.yaw_from_compass and followed else "attitude"
+    if src.yaw_from_compass and not followed:
+        src.yaw_reason += (f"; but the attitude's yaw differs from the logged compass heading by "
+                           f"{float(np.sqrt((logged_err ** 2).mean())):.0f} deg RMS, so it did "
+                           "not follow this compass: the yaw is used")
+    soft = {"sphere": "scale", "axis": "diagonal"}.get(request.model, "full")
+    full = _fit(src, np.arange(n), b, heading, soft)
+    half = n // 2
+    first, second = np.arange(half), np.arange(half, n)
+    decl = ef.declination_deg if ef is not None else (
+        math.degrees(math.atan2(full.field_ned[1], full.field_ned[0]))
+        if heading == "attitude" else None)
+    held_out: dict[str, Any] = {}
+    try:
+        part_fit = _fit(src, first, b, heading, soft)
+        held_out = _metrics(src, part_fit, second, decl)
+        held_out["fitted_on"] = "first half"
+        held_out["judged_on"] = "second half"
+    except CalibrationError as exc:
+        held_out = {"error": str(exc)}
+    whole = _metrics(src, full, np.arange(n), decl)
+    o, m, v = full.offset, full.matrix, full.interference
+    r = src.to_body
+    if not np.allclose(r, np.eye(3)):  # back into the frame the autopilot corrects in
+        o, m = r.T @ o, r.T @ m @ r
+        v = None if v is None else r.T @ v
+    und = list(full.undetermined)
+    if full.rms_pct > B.ATTITUDE_MAX_RESIDUAL_PCT:
+        und.append(f"the field does not hold still: the residual RMS is {full.rms_pct:.3g} % of "
+                   f"the field (at most {B.ATTITUDE_MAX_RESIDUAL_PCT:g} %), so the compass "
+                   "sees fields the model does not explain (iron or currents that move, or an "
+                   "attitude that is not the compass's)")
+    gain = None
+    if "scatter_after" in held_out and held_out["scatter_after"] > 0:
+        gain = held_out["scatter_before"] / held_out["scatter_after"]
+        held_out["scatter_gain"] = gain
+        if gain < B.ATTITUDE_MIN_SCATTER_GAIN:
+            und.append(
+                f"on the half of the flight it was not fitted to it shrinks the scatter of the "
+                f"field turned to NED only {gain:.2f} times (at least "
+                f"{B.ATTITUDE_MIN_SCATTER_GAIN:g}): the log's own calibration is about as good, "
+                "or the field does not hold still")
+    warnings = [f"{k}: {w}" for k, w in full.held.items()]
+    stats: dict[str, Any] = {
+        "model": "attitude",
+        "n": int(full.n),
+        "n_input": int(n),
+        "rms": float(full.rms),
+        "radius": float(full.field_strength),
+        "rms_pct_of_radius": float(full.rms_pct),
+        "iterations": int(full.iterations),
+        "converged": bool(full.converged),
+        "stderr": {k: float(s) for k, s in full.stderr.items() if math.isfinite(s)},
+        "warnings": warnings,
+        "rejected": [int(i) for i in full.rejected],
+        "norms": _norm_stats(np.linalg.norm(full.apply(src.raw, src.x), axis=1)),
+        "undetermined": und,
+        "attitude": {
+            "heading": heading,
+            "heading_reason": src.yaw_reason,
+            "field": field_how,
+            "field_ned": [float(c) for c in full.field_ned],
+            "soft_iron": soft,
+            "held": dict(full.held),
+            "attitude_source": src.flight.attitude.name if src.flight.attitude else None,
+            "frame": "body" if np.allclose(r, np.eye(3)) else "sensor (turned back from body)",
+            "whole": whole,
+            "held_out": held_out,
+        },
+        "log": {"format": src.recording.format, "stream": src.recording.stream("mag").name,
+                "instance": request.source.instance, "undo_autopilot_cal": True,
+                "calibrated_by_autopilot": False, "samples": int(n),
+                "device_id": (src.recording.meta.get("device_ids") or {}).get("mag")},
+    }
+    if v is not None:
+        stats["interference"] = {"per": src.x_per, "vector": [float(c) for c in v],
+                                 "unit": src.unit, "source": src.x_name}
+    part = SensorCalibration(offset=o, matrix=m, raw_unit=src.unit, unit=src.unit,
+                             radius=float(full.field_strength), model="attitude", stats=stats,
+                             input_sha256=file_sha256(src.path), source=str(src.path),
+                             expected_field=ef)
+    return part, src
+

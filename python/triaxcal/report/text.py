@@ -1,0 +1,137 @@
+"""The coefficients of a part as a table, and what ``triaxcal fit`` says after a fit: the lines
+the command line prints and the live page shows (one text, two places)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..calibration.part import SensorCalibration
+from ..conventions.units import per_unit
+
+__all__ = ["coefficient_table", "fit_lines", "printable", "stderr_lines"]
+
+
+def printable(text: Any, limit: int = 2000) -> str:
+    """``text`` safe for a terminal: control characters (ESC, BEL, CR, CSI ...) shown as
+    ``\\xNN`` escapes, and at most ``limit`` characters -- for text that came from a file.
+
+    >>> printable("ok\\x1b[2Jgone\\a")
+    'ok\\\\x1b[2Jgone\\\\x07'
+    """
+    import unicodedata
+
+    s = str(text)
+    out = "".join(c if c in " \t" or unicodedata.category(c)[0] not in "CZ"
+                  else c.encode("unicode_escape").decode("ascii") for c in s[:limit])
+    return out + ("..." if len(s) > limit else "")
+
+
+def _num(v: float) -> str:
+    v = float(v)
+    if v == 0:
+        return "0"
+    if not math.isfinite(v):
+        return str(v)
+    return f"{v:.6g}" if 1e-3 <= abs(v) < 1e6 else f"{v:.5e}"
+
+
+def coefficient_table(part: SensorCalibration, sensor: str) -> list[str]:
+    """The part's coefficients as a table: offset, matrix, radius, units, and which way the
+    matrix works.
+
+    >>> import numpy as np, triaxcal as tc
+    >>> part = tc.SensorCalibration(offset=[110, -25, 400], matrix=np.eye(3) / 16384,
+    ...                             raw_unit="counts", unit="g", radius=1.0, model="axis")
+    >>> print("\\n".join(coefficient_table(part, "accel")))
+    accel (counts -> g), model axis: calibrated = (raw - offset) @ matrix.T
+      the matrix multiplies: g per count; the offset is in counts, subtracted first
+                         x             y             z
+      offset           110           -25           400  counts
+      matrix   6.10352e-05             0             0  g/count
+                         0   6.10352e-05             0
+                         0             0   6.10352e-05
+      radius             1 g
+    """
+    rows = [
+        f"{sensor} ({part.raw_unit} -> {part.unit}), model {part.model or '?'}: "
+        "calibrated = (raw - offset) @ matrix.T",
+        f"  the matrix multiplies: {per_unit(part.unit, part.raw_unit)}; the offset is in "
+        f"{part.raw_unit}, subtracted first",
+        f"  {'':6s}{'x':>14s}{'y':>14s}{'z':>14s}",
+        f"  {'offset':6s}" + "".join(f"{_num(v):>14s}" for v in part.offset)
+        + f"  {part.raw_unit}",
+    ]
+    for i, row in enumerate(np.asarray(part.matrix)):
+        label = "matrix" if i == 0 else ""
+        unit = f"  {per_unit(part.unit, part.raw_unit, short=True)}" if i == 0 else ""
+        rows.append(f"  {label:6s}" + "".join(f"{_num(v):>14s}" for v in row) + unit)
+    if part.radius is not None:
+        rows.append(f"  {'radius':6s}{_num(part.radius):>14s} {part.unit}")
+    if part.temperature is not None:
+        t = part.temperature
+        rows.append(f"  temperature terms about {t.temp_ref_c:g} deg C (see the calibration "
+                    "file)")
+    if part.valid is False:
+        rows.append("  NOT VALID (written with --force): " + "; ".join(part.invalid_reasons))
+    return rows
+
+
+def stderr_lines(part: SensorCalibration) -> list[str]:
+    """The standard errors of the fitted coefficients, labelled as such (1 sigma)."""
+    se = part.stats.get("stderr") or {}
+    if not se:
+        return []
+    unit = {"offset": part.raw_unit, "diag": per_unit(part.unit, part.raw_unit, short=True),
+            "offdiag": per_unit(part.unit, part.raw_unit, short=True)}
+    out = []
+    for name, v in se.items():
+        kind = name.split("_")[0]
+        u = unit.get(kind, part.raw_unit if name == "data_radius" else "")
+        out.append(f"{name} +-{float(v):.3g} {u}".rstrip())
+    return ["  standard errors (1 sigma, not the values): " + ", ".join(out)]
+
+
+def fit_lines(saved: Any) -> list[str]:
+    """What ``triaxcal fit`` prints after writing a part (a
+    :class:`~triaxcal.calibration.session.Saved`): the summary line, the coefficient table, the
+    model choice, the field, the alignment, every warning and the autopilot's own calibration."""
+    from ..calibration.source import autopilot_lines
+
+    out = saved.outcome
+    part = out.part
+    s = part.stats
+    som = (s.get("norms") or {}).get("std_over_mean")
+    rms_pct = s.get("rms_pct_of_radius")
+    lines = [
+        f"{saved.stored.verb} {saved.stored.path}: {out.sensor} ({part.raw_unit} -> "
+        f"{part.unit}), model {part.model}, {s['n']} readings used, {len(out.rejected)} "
+        f"rejected; residual RMS {s['rms']:.4g} {part.unit}"
+        + ("" if rms_pct is None else f" ({rms_pct:.3g} % of radius)")
+        + f"; std/mean of |v| {'n/a' if som is None else f'{100 * som:.3g} %'}; coverage "
+        f"{s.get('coverage_pct', 0.0):.0f} %"
+        + ("" if part.valid is not False else "; NOT VALID (written with --force)"),
+    ]
+    lines += ["  " + r for r in coefficient_table(part, out.sensor)]
+    lines += stderr_lines(part)
+    if out.reason:
+        lines.append(f"  model: {out.reason}")
+    if out.expected is not None:
+        lines.append(f"  expected field: {out.expected.text()}")
+        if s.get("field_strength_ut") is not None:
+            lines.append(f"  the readings show {s['field_strength_ut']:.4g} uT")
+    if "yaw" in s:
+        from ..methods.yaw import yaw_text
+
+        lines.append("  " + yaw_text(s["yaw"], part.unit).replace("\n", "\n  "))
+    if saved.alignment_text:
+        lines.append("  " + saved.alignment_text.replace("\n", "\n  "))
+    for w in s.get("warnings", []):
+        lines.append(f"  warning: {printable(w)}")
+    if out.source is not None and out.source.recording is not None:
+        lines += autopilot_lines(out.source, out.sensor, part.offset, part.matrix, part.unit)
+        for w in out.source.recording.meta.get("warnings", []):
+            lines.append(f"  warning: {printable(w)}")
+    return lines
