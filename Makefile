@@ -14,8 +14,12 @@ ifeq ($(origin PY),undefined)
     PY := $(VENV)/bin/python
   endif
 endif
-# .venv is made only when PY is its Python
+# .venv is made only when PY is its Python; then its tools come first on PATH, as in an
+# activated environment (maturin finds the ziglang package's zig through it)
 PY_DEP := $(filter $(VENV)/bin/python,$(PY))
+ifneq ($(PY_DEP),)
+  export PATH := $(abspath $(VENV))/bin:$(PATH)
+endif
 
 APT_PACKAGES := gcc python3-venv gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium \
                 chromium-driver valgrind gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
