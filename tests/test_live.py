@@ -223,6 +223,7 @@ def test_finish_shows_what_triaxcal_fit_gives(recording, tmp_path):
         assert fit["stderr"] == part.stats["stderr"]
 
 
+@pytest.mark.slow
 def test_save_and_reset_do_what_the_cli_does(recording, tmp_path, capsys):
     _, frames = recording
     session = tmp_path / "session.csv"
@@ -385,6 +386,7 @@ def test_port_taken_moves_to_the_next_and_other_hosts_are_flagged(tmp_path):
         LiveServer(st, port=70000)
 
 
+@pytest.mark.slow
 def test_send_goes_over_the_open_port_with_the_echo_check(tmp_path):
     imu = SimIMU(4)
     with SimDevice(imu, globe_script(hold_s=0.6, seed=4), speed=30, loop=True, seed=4) as dev:
