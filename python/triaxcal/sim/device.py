@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._checks.options import seed as seed_of
 from ..errors import CalibrationError
 from ..io.protocol import encode_binary, encode_framed, encode_raw, encode_text
 from .imu import SimIMU
@@ -195,8 +196,8 @@ class SimDevice:
             if self.channels == 10
             else np.hstack([self._frames[:, :6], np.zeros((len(self._frames), 3), np.int32)])
         )
-        self._frng = np.random.default_rng([faults.seed, 0xFA17])
-        self._brng = np.random.default_rng([seed, 0xBAD])
+        self._frng = np.random.default_rng([seed_of(faults.seed, "faults.seed"), 0xFA17])
+        self._brng = np.random.default_rng([seed_of(seed), 0xBAD])
         self.sent: list[SentFrame] = []
         self.received = bytearray()
         self.motioncal: MotionCalPacket | None = None
