@@ -52,7 +52,10 @@ class Alignment:
 
     def __post_init__(self) -> None:
         r = _schema.reals(self.rotation, (3, 3), "alignment.rotation")
-        if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) <= 0:
+        # (the entries of a rotation lie within +-1: larger ones are refused before r @ r.T,
+        # which they could overflow)
+        if (np.abs(r).max() > 1 + 1e-6 or np.abs(r @ r.T - np.eye(3)).max() > 1e-6
+                or np.linalg.det(r) <= 0):
             raise CalibrationError(
                 "alignment.rotation must be a proper rotation (orthonormal rows, determinant "
                 f"+1), got {r.tolist()}; a mirrored axis is a sign error in the readings")

@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.arrays import as_points
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
 from ..quality import bounds as B
@@ -299,6 +300,8 @@ def check_part(part: SensorCalibration, sensor: str, *, points: Any = None) -> V
     """
     if not isinstance(part, SensorCalibration):
         raise CalibrationError(f"the gate judges a SensorCalibration, got {type(part).__name__}")
+    if points is not None:
+        points = as_points(points, "points")
     s = part.stats
     why: list[str] = []
     if s.get("converged") is False:

@@ -7,11 +7,13 @@ refuse a fit which is not a calibration (:func:`undetermined`). ``triaxcal fit``
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
 from ..io.akm import apply_asa
@@ -75,7 +77,13 @@ def fit_session(
     """
     from ..fit.select import fit_robust
 
-    req = request if request is not None else FitRequest()
+    req = options.instance(request if request is not None else FitRequest(), FitRequest,
+                           "request", "a FitRequest (or None)")
+    if not isinstance(data, (Table, str, os.PathLike)):
+        raise CalibrationError(f"data must be a file name or a Table (from read_table), got "
+                               f"{type(data).__name__}")
+    if accel is not None:
+        options.instance(accel, SensorCalibration, "accel", "a SensorCalibration or None")
     sensor = req.sensor
     notes: list[str] = []
     if req.method == "attitude":
@@ -198,6 +206,12 @@ def fit_to_file(
     had for this sensor is kept in the new part's ``previous``. The accelerometer part already
     in ``output`` gives the vertical of a yaw-only fit and the frame of ``field.align``.
     """
+    options.instance(request, FitRequest, "request", "a FitRequest")
+    options.path(output, "output")
+    options.flag(new, "new")
+    options.flag(force, "force")
+    if sensor_id is not None and not isinstance(sensor_id, str):
+        raise CalibrationError(f"sensor_id must be text or None, got {sensor_id!r:.60}")
     before = existing_calibration(output, new=new)
     accel = before.accel if before is not None else None
     out = fit_session(data, request, accel=accel)

@@ -11,8 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from ..calibration.part import SensorCalibration
+from ..conventions.names import SENSORS
 from ..conventions.units import per_unit
+from ..errors import CalibrationError
 
 __all__ = ["SUMMARY_METHODS", "SUMMARY_MODELS", "coefficient_table", "fit_lines", "printable",
            "stderr_lines", "stored_text", "summary_only", "summary_text"]
@@ -63,6 +66,10 @@ def coefficient_table(part: SensorCalibration, sensor: str) -> list[str]:
                          0             0   6.10352e-05
       radius             1 g
     """
+    options.instance(part, SensorCalibration, "part", "a SensorCalibration")
+    if not isinstance(sensor, str):
+        raise CalibrationError(f"sensor must name the part ({', '.join(SENSORS)}), got "
+                               f"{sensor!r:.60}")
     rows = [
         f"{sensor} ({part.raw_unit} -> {part.unit}), model {part.model or '?'}: "
         "calibrated = (raw - offset) @ matrix.T",
