@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from ..conventions.units import UNITS, unit_factor
-from ..errors import CalibrationError
+from ..errors import CalibrationError, RefusedError
 from ..quality import bounds as B
 from .part import SensorCalibration
 
@@ -109,9 +109,11 @@ class Verdict:
                 + f". Record instead: {self.record_instead}")
 
 
-class InvalidCalibrationError(CalibrationError):
+class InvalidCalibrationError(RefusedError):
     """A part the validity gate refused; ``verdict`` holds the reasons. The command line exits
     with status 2 for it (a refusal, not a failure to run)."""
+
+    verb = "not written"
 
     def __init__(self, message: str, verdict: Verdict) -> None:
         super().__init__(message)

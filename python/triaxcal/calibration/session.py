@@ -70,8 +70,9 @@ def fit_session(
     Returns
     -------
     FitOutcome
-        The part (not yet judged by the validity gate: :func:`~triaxcal.calibration.gate.check`),
-        the points fitted, the rejected indices and what to tell the user.
+        The part (not yet judged by the validity gate:
+        :func:`~triaxcal.calibration.gate.check_part`), the points fitted, the rejected indices and
+        what to tell the user.
     """
     from ..fit.select import fit_robust
 
