@@ -32,7 +32,7 @@ import numpy as np
 
 from ..conventions.units import unit_factor
 from ..errors import CalibrationError
-from ..io.logs import read_log
+from ..io.logs import read_log, undo_autopilot_calibration
 from ..io.logs.flight import FlightData, read_flight
 from ..io.recording import LogRecording
 from ..methods.attitude import AttitudeFit, fit_attitude, tilt_dcm
@@ -93,14 +93,14 @@ def flight_source(path: str | Path, request: FitRequest) -> FlightSource:
     """The compass readings of log ``path`` paired with attitude, current or throttle."""
     p = Path(path)
     instance = request.source.instance
+    logged_rec = read_log(p, instance=instance)  # read once: the logged and the raw readings
     try:
-        rec = read_log(p, instance=instance, undo_autopilot_cal=True)
+        rec = undo_autopilot_calibration(logged_rec)
     except CalibrationError as exc:
         raise CalibrationError(f"--method attitude fits the raw compass and needs the "
                                f"autopilot's calibration undone, which fails here: {exc}") from None
-    logged_rec = read_log(p, instance=instance)
     mag = rec.stream("mag")
-    flight = read_flight(p)
+    flight = read_flight(p, time_origin_us=rec.meta.get("time_origin_us"))
     if flight.attitude is None:
         raise CalibrationError(
             f"{p} has no attitude (ArduPilot ATT, PX4 vehicle_attitude): a compass calibration "
