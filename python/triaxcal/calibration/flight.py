@@ -23,8 +23,10 @@ with what the flight determined, checked on the half of the flight it was not fi
 * **Interference.** The battery current when it varies by ``MIN_CURRENT_SPAN_A`` or more, else
   the throttle when it varies by ``MIN_THROTTLE_SPAN``; otherwise none.
 * **Held-out check.** The same fit on the first half of the flight, judged on the second: the
-  scatter of the field turned to NED by the logged attitude and the heading error, with the
-  log's own calibration and with the fit (``stats["attitude"]["held_out"]``).
+  scatter of the field turned to NED by the logged attitude, the field error as the fit
+  measures it (:func:`field_error`) and the heading error, with the log's own calibration and
+  with the fit (``stats["attitude"]["held_out"]``, which also keeps the first half's fit for
+  the report's figure, :mod:`triaxcal.report.flight`).
 """
 
 from __future__ import annotations
@@ -49,7 +51,8 @@ from .request import FitRequest
 from .source import file_sha256
 
 __all__ = ["MIN_CURRENT_SPAN_A", "MIN_THROTTLE_SPAN", "FlightSource", "fit_flight",
-           "flight_source", "heading_error_deg", "ned_scatter", "record_instead"]
+           "field_error", "flight_source", "heading_error_deg", "ned_scatter",
+           "record_instead", "write_demo_flight"]
 
 #: Least range of the battery current (A) that makes a current interference term worth fitting.
 MIN_CURRENT_SPAN_A = 2.0
@@ -252,6 +255,20 @@ def _fit(src: FlightSource, sel: np.ndarray, b: np.ndarray | None, heading: str,
                         soft_iron=soft)
 
 
+def field_error(calibrated: Any, dcm: Any, field_ned: Any, heading: str) -> np.ndarray:
+    """Per reading, the distance (in the readings' unit) between the calibrated reading and the
+    field as the fit compares it: turned into the body by the attitude (``heading=
+    "attitude"``), or by the attitude's roll and pitch and the compass's own heading
+    (``"free"``: ``|(|h_xy| - H, h_z - Z)|`` with ``h`` the reading turned level; MAGFit's
+    measure)."""
+    c, d, b = np.asarray(calibrated, float), np.asarray(dcm, float), np.asarray(field_ned, float)
+    if heading == "attitude":
+        return np.asarray(np.linalg.norm(c - np.einsum("nji,j->ni", d, b), axis=1))
+    h = np.einsum("nij,nj->ni", tilt_dcm(d), c)
+    return np.asarray(np.hypot(np.hypot(h[:, 0], h[:, 1]) - math.hypot(b[0], b[1]),
+                               h[:, 2] - b[2]))
+
+
 def _metrics(src: FlightSource, fit: AttitudeFit, sel: np.ndarray,
              declination: float | None) -> dict[str, Any]:
     x = None if src.x is None else src.x[sel]
@@ -259,8 +276,8 @@ def _metrics(src: FlightSource, fit: AttitudeFit, sel: np.ndarray,
     before = src.logged[sel] @ src.to_body.T
     eb = heading_error_deg(before, src.dcm[sel], declination)
     ea = heading_error_deg(after, src.dcm[sel], declination)
-    fb = np.linalg.norm(before - np.einsum("nji,j->ni", src.dcm[sel], fit.field_ned), axis=1)
-    fa = np.linalg.norm(after - np.einsum("nji,j->ni", src.dcm[sel], fit.field_ned), axis=1)
+    fb = field_error(before, src.dcm[sel], fit.field_ned, fit.heading)
+    fa = field_error(after, src.dcm[sel], fit.field_ned, fit.heading)
     return {
         "scatter_before": ned_scatter(before, src.dcm[sel]),
         "scatter_after": ned_scatter(after, src.dcm[sel]),
@@ -269,6 +286,20 @@ def _metrics(src: FlightSource, fit: AttitudeFit, sel: np.ndarray,
         "field_error_rms_before": float(np.sqrt((fb ** 2).mean())),
         "field_error_rms_after": float(np.sqrt((fa ** 2).mean())),
     }
+
+
+def _device_id(rec: LogRecording) -> int | None:
+    """The compass's device id: as the log's sensor topics name it, else (PX4) the
+    ``CAL_MAGn_ID`` of the calibration slot whose calibration was undone."""
+    dev = (rec.meta.get("device_ids") or {}).get("mag")
+    if dev is None and rec.format == "px4-ulog" and rec.autopilot is not None and \
+            rec.autopilot.mag is not None:
+        v = rec.params.get(f"CAL_MAG{rec.autopilot.mag.index}_ID")
+        try:
+            dev = int(v) if v is not None and int(v) != 0 else None
+        except (TypeError, ValueError):
+            dev = None
+    return dev
 
 
 def record_instead(heading: str, field_fitted: bool, src: FlightSource) -> str:
@@ -384,7 +415,7 @@ def fit_flight(path: str | Path, request: FitRequest) -> tuple[SensorCalibration
         "log": {"format": src.recording.format, "stream": src.recording.stream("mag").name,
                 "instance": request.source.instance, "undo_autopilot_cal": True,
                 "calibrated_by_autopilot": False, "samples": int(n),
-                "device_id": (src.recording.meta.get("device_ids") or {}).get("mag")},
+                "device_id": _device_id(src.recording)},
     }
     if und:
         stats["record_instead"] = record_instead(heading, b is None, src)
@@ -397,3 +428,23 @@ def fit_flight(path: str | Path, request: FitRequest) -> tuple[SensorCalibration
                              expected_field=ef)
     return part, src
 
+
+
+#: Where the simulated flight of ``triaxcal demo --flight`` flies (lat deg, lon deg, alt m).
+DEMO_LOCATION = (47.37, 8.54, 400.0)
+
+
+def write_demo_flight(out_dir: str | Path, *, location: tuple[float, float, float] = DEMO_LOCATION,
+                      date: str | None = None, seed: int = 7) -> dict[str, Path]:
+    """Write the simulated flight of :mod:`triaxcal.sim.flight` into ``out_dir``:
+    ``flight.BIN`` (ArduPilot DataFlash), ``flight.ulg`` (the same flight as a PX4 ULog) and
+    ``flight_truth.json`` (the truth in ArduPilot's convention), with the World Magnetic
+    Model's field at ``location`` on ``date`` (default today, as ``triaxcal fit`` takes it) --
+    what ``triaxcal demo --flight`` writes. ``triaxcal fit DIR/flight.BIN --sensor mag
+    --method attitude`` recovers the truth (the log's GPS gives the place)."""
+    from ..methods.field import expected_field
+    from ..sim.flight import write_flight
+
+    ef = expected_field(*location, date=date)
+    field_mg = np.array(ef.vector_ned_ut()) * unit_factor("uT", "mG")
+    return write_flight(out_dir, field_mg, location=location, seed=seed, field_date=ef.date)

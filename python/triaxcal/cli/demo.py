@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..calibration.file import Calibration
+from ..calibration.flight import write_demo_flight
 from ..calibration.part import SensorCalibration
 from ..capture.run import CaptureResult, capture, channel_names, read_session
 from ..detect.session import PoseSettings, session_poses
@@ -54,7 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=HELP[0].upper() + HELP[1:] + ". Writes session.csv, results.json, "
         "calibration.json, C headers, motioncal.bin and report figures into --out.",
     )
-    p.add_argument("--out", default="triaxcal-demo", metavar="DIR",
+    p.add_argument("--out", "--out-dir", dest="out", default="triaxcal-demo", metavar="DIR",
                    help="folder for the session, the calibration and its reports "
                         "(default ./triaxcal-demo)")
     p.add_argument("--no-plot", action="store_true",
@@ -67,6 +68,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "that the sphere fills in about 40 s)")
     p.add_argument("--seed", type=int, default=1, help="seed of the simulated sensor (default 1)")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
+    p.add_argument("--flight", action="store_true",
+                   help="instead: write a simulated flight with known compass errors, DIR/"
+                        "flight.BIN (ArduPilot), DIR/flight.ulg (PX4) and DIR/flight_truth.json, "
+                        "for triaxcal fit DIR/flight.BIN --sensor mag --method attitude")
     add_pose_options(p)
     add_live_options(p)
     p.set_defaults(func=run)
@@ -75,6 +80,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.flight:  # the simulated flight logs and their truth, nothing else
+        for kind, path in write_demo_flight(out).items():
+            print(f"{kind}: {path}")
+        return 0
     if args.speed is None:
         args.speed = 5.0 if args.live else 40.0
     if not args.speed > 0:

@@ -18,9 +18,10 @@ with the same current, ``CTUN`` (throttle), ``GPS`` and ``PARM`` records (``AHRS
 too, which MAGFit adds to the attitude), each type described by its ``FMT`` record, which
 pymavlink and triaxcal read. The format (ArduPilot ``libraries/AP_Logger/LogStructure.h``):
 every record is ``0xA3 0x95 <type>`` then the fields packed little-endian as the type's
-``FMT`` record says (``Q`` uint64, ``I``/``H``/``B`` uint32/16/8, ``f`` float32, ``L`` int32 degrees * 1e7,
-``N`` char[16], ``n`` char[4], ``Z`` char[64]); ``FMT`` itself is type 128. ``GPS`` carries
-the GPS week and time of week (``GWk``, ``GMS``) from which pymavlink builds its clock.
+``FMT`` record says (``Q`` uint64, ``I``/``H``/``B`` uint32/16/8, ``f`` float32, ``L`` int32
+degrees * 1e7, ``N`` char[16], ``n`` char[4], ``Z`` char[64]); ``FMT`` itself is type 128.
+``GPS`` carries the GPS week and time of week (``GWk``, ``GMS``) from which pymavlink builds
+its clock.
 
 **ULog** (``flight.ulg``, :mod:`triaxcal.sim.ulog`): the same samples as PX4 v1.14 logs them:
 ``vehicle_magnetometer`` (gauss, body frame, no calibration stored: ``CAL_MAG0_*OFF`` = 0,
@@ -80,6 +81,7 @@ class FlightTruth:
     field_ned: np.ndarray        # mG
     location: tuple[float, float, float]
     trim_deg: tuple[float, float] = (0.0, 0.0)   # AHRS_TRIM_X/Y (deg)
+    field_date: str | None = None                # the date the field is the WMM's for
 
     def to_dict(self) -> dict[str, Any]:
         m = self.matrix
@@ -95,13 +97,14 @@ class FlightTruth:
             "field_frame": "north, east, down",
             "location": list(self.location),
             "AHRS_TRIM_deg": list(self.trim_deg),
+            "field_date": self.field_date,
         }
 
 
 def simulate_flight(field_ned_mg: Any, *, duration_s: float = 600.0, rate_hz: float = 10.0,
                     seed: int = 7, location: tuple[float, float, float] = (47.37, 8.54, 400.0),
                     noise_mg: float = 2.0, attitude_noise_deg: float = 0.3,
-                    trim_deg: tuple[float, float] = (0.0, 0.0)
+                    trim_deg: tuple[float, float] = (0.0, 0.0), field_date: str | None = None
                     ) -> tuple[dict[str, np.ndarray], FlightTruth]:
     """The samples of a simulated flight (time in s, attitude in deg, current in A, throttle
     0..1, raw compass in mG) and the truth.
@@ -146,7 +149,7 @@ def simulate_flight(field_ned_mg: Any, *, duration_s: float = 600.0, rate_hz: fl
         vehicle = np.degrees(np.column_stack([
             np.arctan2(r[:, 2, 1], r[:, 2, 2]), np.arcsin(np.clip(-r[:, 2, 0], -1, 1)),
             np.arctan2(r[:, 1, 0], r[:, 0, 0]) % (2 * np.pi)]))
-    truth = replace(truth, trim_deg=(tx, ty))
+    truth = replace(truth, trim_deg=(tx, ty), field_date=field_date)
     return {"t": t, "attitude": logged_att, "attitude_vehicle": vehicle, "current": current,
             "throttle": throttle, "mag": raw}, truth
 

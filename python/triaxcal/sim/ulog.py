@@ -119,7 +119,7 @@ def ulog_bytes(
                           for t, n, c in fields])
         n_rows = len(np.asarray(cols["timestamp"]))
         rec = np.zeros(n_rows, dtype=dtype)
-        for t, n, c in fields:
+        for _, n, c in fields:
             v = np.asarray(cols[n])
             if v.shape != ((n_rows,) if c == 1 else (n_rows, c)):
                 raise CalibrationError(f"ULog topic {name}: field {n} has shape {v.shape}, "
