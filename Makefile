@@ -3,7 +3,7 @@ PY ?= python3
 APT_PACKAGES := gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium chromium-driver valgrind \
                 gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
 
-.PHONY: deps install test test-rust test-python lint stubs bench bench-instructions instructions-guard demo wheel wheel-check firmware-check
+.PHONY: deps install test test-rust test-python lint stubs docs bench bench-instructions instructions-guard demo wheel wheel-check firmware-check
 
 # Debian packages the tests need (the AVR firmware build, its QEMU run, the Arduino sketch
 # built against the Arduino AVR core; the firmware library's Cortex-M3 build and QEMU run;
@@ -29,7 +29,7 @@ test-python:
 	$(PY) -m pytest -q
 
 lint:
-	$(PY) -m ruff check python tests benches
+	$(PY) -m ruff check python tests benches docs
 	$(PY) -m mypy python/triaxcal --ignore-missing-imports
 	$(PY) -m mypy.stubtest triaxcal._core
 
@@ -50,8 +50,15 @@ wheel-check: wheel
 firmware-check:
 	$(MAKE) -C firmware check
 
-# Everything: the README's test command, and what CI runs.
-test: deps install test-rust lint test-python firmware-check instructions-guard wheel-check
+# The documentation site into docs/_build/html (open docs/_build/html/index.html; it works
+# offline): Sphinx with warnings as errors, the gallery's examples run, the API and command-line
+# reference generated from the package. Needs the docs extra (part of the test extra).
+docs:
+	$(PY) -m sphinx -b html -W --keep-going -j auto docs docs/_build/html
+
+# Everything: the README's test command, and what CI runs. The site is built before pytest,
+# whose tests/test_docs_site.py opens it in a browser.
+test: deps install test-rust lint docs test-python firmware-check instructions-guard wheel-check
 
 bench:
 	$(PY) benches/bench_fit.py

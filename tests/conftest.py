@@ -27,3 +27,18 @@ def readme_section(heading: str) -> str:
     m = re.search(rf"^## {re.escape(heading)}.*?$(.*?)(?=^## |\Z)", text, re.S | re.M)
     assert m, f"README has no section '## {heading}'"
     return m.group(1)
+
+
+def doc_page(page: str, heading: str | None = None) -> str:
+    """The text of a documentation page (``docs/<page>``), or of its section under the heading
+    that starts with ``heading`` (any level), up to the next heading of the same or a higher
+    level."""
+    text = (ROOT / "docs" / page).read_text(encoding="utf-8")
+    if heading is None:
+        return text
+    m = re.search(rf"^(#+) {re.escape(heading)}.*?$", text, re.M)
+    assert m, f"docs/{page} has no heading '{heading}'"
+    level = len(m.group(1))
+    rest = text[m.end():]
+    end = re.search(rf"^#{{1,{level}}} ", rest, re.M)
+    return rest[: end.start()] if end else rest

@@ -57,7 +57,7 @@ def test_asa_before_fitting_lets_the_sphere_model_fit(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fit", str(f), "--sensor", "mag", "--model", "sphere", "--radius", "50uT",
                  "--asa", ",".join(map(str, ASA)), "--sigma", "0", "-o", str(out)]) == 0
-    assert main(["report", str(out), "--json", str(tmp_path / "r.json")]) == 0
+    assert main(["report", str(out), "-o", str(tmp_path / "r.json")]) == 0
     import json
 
     rep = json.loads((tmp_path / "r.json").read_text())["mag"]

@@ -292,7 +292,7 @@ def test_report_of_a_flight_calibration_draws_the_held_out_check(flight, tmp_pat
     held = part.stats["attitude"]["held_out"]
     capsys.readouterr()
     fig, numbers = tmp_path / "fig.png", tmp_path / "r.json"
-    assert main(["report", str(cal), "--plot", str(fig), "--json", str(numbers)]) == 0
+    assert main(["report", str(cal), "--plot", str(fig), "-o", str(numbers)]) == 0
     out = capsys.readouterr().out
     assert "held-out check" in out and "heading error RMS" in out
     assert fig.is_file() and fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

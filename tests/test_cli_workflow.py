@@ -1,5 +1,6 @@
-"""The first hour of a new user, through the command line: the README workflow on the demo's
-own files, fits that must not be written, help text, units and implausible radii."""
+"""The first hour of a new user, through the command line: the workflow page
+(docs/guide/workflow.md) on the demo's own files, fits that must not be written, help text, units
+and implausible radii."""
 
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ def demo_dir(tmp_path_factory) -> Path:
     return here
 
 
-def test_demo_then_report_as_the_readme_says(demo_dir, monkeypatch, capsys):
+def test_demo_then_report_as_the_docs_say(demo_dir, monkeypatch, capsys):
     """Before: 'session.csv has changed since the calibration was made (SHA-256 differs)'."""
     monkeypatch.chdir(demo_dir)
     capsys.readouterr()
@@ -86,8 +87,8 @@ def test_demo_calibration_exports_in_every_format(demo_dir, tmp_path, capsys):
 
 
 def _workflow_lines() -> list[list[str]]:
-    text = (ROOT / "README.md").read_text()
-    block = text.split("### The workflow", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    text = (ROOT / "docs" / "guide" / "workflow.md").read_text()
+    block = text.split("## The workflow", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
     out = []
     for line in block.splitlines():
         line = line.split("#", 1)[0].strip()
@@ -99,9 +100,9 @@ def _workflow_lines() -> list[list[str]]:
 
 
 @pytest.mark.slow
-def test_readme_workflow_runs_as_written_on_the_demo_files(demo_dir, tmp_path, monkeypatch,
+def test_workflow_page_runs_as_written_on_the_demo_files(demo_dir, tmp_path, monkeypatch,
                                                            capsys):
-    """Every line of the README's workflow, in order: capture is the demo's capture (its
+    """Every line of the workflow page, in order: capture is the demo's capture (its
     session.csv), send talks to the simulated board; everything else runs as written."""
     monkeypatch.chdir(tmp_path)
     lines = _workflow_lines()
@@ -110,7 +111,8 @@ def test_readme_workflow_runs_as_written_on_the_demo_files(demo_dir, tmp_path, m
     with sim.SimDevice(speed=10) as dev:
         for argv in lines:
             if argv[0] == "capture":
-                assert argv[argv.index("--out") + 1] == "session.csv"
+                opt = next(a for a in ("-o", "--output", "--out") if a in argv)
+                assert argv[argv.index(opt) + 1] == "session.csv"
                 shutil.copy(demo_dir / "triaxcal-demo" / "session.csv", "session.csv")
                 continue
             if argv[0] == "send":

@@ -257,7 +257,7 @@ def test_the_board_calibrates_itself(sim_elf, tmp_path, capsys):
         # the seed's program: the board finds the 84 poses of the globe, fits and stores
         assert main(["capture", "--port", pty, "--protocol", "framed", "--board-poses",
                      "--rate-hz", "1000", "--holdoff", "0.2", "--poses", "84", "--seconds",
-                     "240", "--out", str(session), "--quiet"]) == 0
+                     "240", "-o", str(session), "--quiet"]) == 0
         capsys.readouterr()
         assert main(["board", "read", "--port", pty, "--timeout", "30", "-o",
                      str(board_json)]) == 0

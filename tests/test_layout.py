@@ -27,7 +27,7 @@ LAYERS = {
     "calibration": 8,
     "report": 9,
     "export": 10,
-    "fleet": 11, "live": 11, "dask": 12,
+    "fleet": 11, "live": 11, "dask": 12, "demo": 12,
     "cli": 13,
     "__init__": 14,
 }

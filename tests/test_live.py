@@ -297,7 +297,7 @@ def test_missing_extra_names_it(monkeypatch, tmp_path, capsys):
                         lambda name, *a: None if name == "uvicorn" else real(name, *a))
     with pytest.raises(CalibrationError, match=r"pip install 'triaxcal\[live\]'"):
         server.LiveServer(LiveState(tmp_path / "s.csv", NAMES), port=0)
-    assert main(["capture", "--port", "/nonexistent", "--protocol", "framed", "--out",
+    assert main(["capture", "--port", "/nonexistent", "--protocol", "framed", "-o",
                  str(tmp_path / "x.csv"), "--live"]) == 1
     monkeypatch.undo()
     # one board per page: several ports with --live are refused before anything opens
@@ -464,7 +464,7 @@ def test_capture_live_cli_serves_and_ctrl_c_saves_and_exits(tmp_path):
     with SimDevice(SimIMU(5), globe_script(hold_s=0.8, seed=5), speed=10, loop=True,
                    seed=5) as dev:
         proc = _spawn(["capture", "--port", dev.port, "--protocol", "framed", "--live",
-                       "--no-browser", "--http-port", "0", "--out", "s.csv", "--no-bell"],
+                       "--no-browser", "--http-port", "0", "-o", "s.csv", "--no-bell"],
                       tmp_path)
         try:
             url = _url_from(proc)
@@ -498,7 +498,7 @@ def test_capture_live_cli_serves_and_ctrl_c_saves_and_exits(tmp_path):
 @pytest.mark.slow
 def test_demo_live_ends_on_the_session_fit_and_lingers_until_ctrl_c(tmp_path):
     proc = _spawn(["demo", "--live", "--no-browser", "--http-port", "0", "--speed", "20",
-                   "--no-plot", "--quiet", "--out", "d"], tmp_path)
+                   "--no-plot", "--quiet", "--out-dir", "d"], tmp_path)
     try:
         url = _url_from(proc)
         err: list[str] = []

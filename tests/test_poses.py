@@ -91,9 +91,16 @@ def test_settings_are_validated():
         PoseSettings.from_dict({"window": 25, "mystery": 1})
     with pytest.raises(tc.CalibrationError, match="accelerometer"):
         PoseSettings().resolve(("t", "gx", "gy", "gz"), np.zeros((10, 4)))
-    with pytest.raises(tc.CalibrationError, match="--rate-hz"):
+    # the API's names; a command's flags when a command runs
+    from triaxcal._checks.spelling import command_line
+
+    with pytest.raises(tc.CalibrationError, match=r"holdoff_s needs .* \(rate_hz;"):
         PoseSettings(holdoff_s=2).resolve(("ax", "ay", "az"), np.ones((10, 3)))
-    with pytest.raises(tc.CalibrationError, match="--counts-per-g"):
+    with pytest.raises(tc.CalibrationError, match=r"\(counts_per_g\)"):
+        PoseSettings().resolve(("ax", "ay", "az"), np.zeros((10, 3)))
+    with command_line(), pytest.raises(tc.CalibrationError, match=r"--holdoff needs .*--rate-hz"):
+        PoseSettings(holdoff_s=2).resolve(("ax", "ay", "az"), np.ones((10, 3)))
+    with command_line(), pytest.raises(tc.CalibrationError, match="--counts-per-g"):
         PoseSettings().resolve(("ax", "ay", "az"), np.zeros((10, 3)))
     assert PoseSettings.from_dict(PoseSettings(holdoff_s=2.0).to_dict()) == PoseSettings(
         holdoff_s=2.0)
@@ -117,7 +124,7 @@ def test_command_line_options_map_to_settings():
     s = settings_from_args(p.parse_args(["--window", "50", "--accel-threshold", "0.05",
                                          "--gyro-threshold", "40", "--mag-threshold", "off",
                                          "--holdoff", "2", "--rate-hz", "100",
-                                         "--units-per-g", "8192"]))
+                                         "--counts-per-g", "8192"]))
     assert s == PoseSettings(window=50, accel_threshold_g=0.05, gyro_threshold=40.0,
                              use_mag=False, holdoff_s=2.0, rate_hz=100.0, counts_per_g=8192.0)
     for bad in (["--window", "0"], ["--gyro-threshold", "-3"], ["--holdoff", "nan"],

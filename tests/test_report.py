@@ -238,15 +238,15 @@ def test_plot_needs_matplotlib(monkeypatch, tmp_path):
         plot_report(_sphere(50), part, tmp_path / "x.png")
 
 
-def test_readme_export_section_python_runs(realdata, tmp_path, monkeypatch, capsys):
-    """The Python example of the README's export section runs as written."""
-    from conftest import readme_section
+def test_workflow_page_python_runs(realdata, tmp_path, monkeypatch, capsys):
+    """The Python example of the workflow page (docs/guide/workflow.md) runs as written."""
+    from conftest import doc_page
 
-    section = readme_section("Calibration files, firmware export, quality report")
+    section = doc_page("guide/workflow.md")
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
     raw = np.loadtxt(realdata / "icm20948-magneto" / "icm_20948_cal_acc.csv", delimiter=",")
     monkeypatch.chdir(tmp_path)
-    script = tmp_path / "readme_example.py"
+    script = tmp_path / "workflow_example.py"
     script.write_text(code)
     runpy.run_path(str(script), init_globals={"raw": raw})
     assert tc.Calibration.load(tmp_path / "cal.json").sensor_id == "board-7"

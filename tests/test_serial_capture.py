@@ -145,8 +145,8 @@ def test_cli_polled_capture_at_a_fixed_rate(tmp_path, capsys):
     out = tmp_path / "p.csv"
     with device(speed=1.0) as dev:
         t0 = time.monotonic()
-        rc = main(["capture", "--port", dev.port, "--protocol", "binary", "--poll-hz", "100",
-                   "--samples", "50", "--out", str(out), "--quiet", "--no-bell"])
+        rc = main(["capture", "--port", dev.port, "--protocol", "binary", "--rate-hz", "100",
+                   "--samples", "50", "-o", str(out), "--quiet", "--no-bell"])
         elapsed = time.monotonic() - t0
         sent = list(dev.sent)
     assert rc == 0
@@ -241,7 +241,7 @@ def test_ctrl_c_stops_cleanly_with_everything_saved(tmp_path):
         proc = subprocess.Popen(
             [sys.executable, "-c",
              "import sys; from triaxcal.cli import main; sys.exit(main(sys.argv[1:]))",
-             "capture", "--port", dev.port, "--protocol", "framed", "--out", str(out)],
+             "capture", "--port", dev.port, "--protocol", "framed", "-o", str(out)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )
         deadline = time.monotonic() + 15
@@ -353,7 +353,7 @@ def test_nonexistent_port_is_reported_quickly(tmp_path, capsys):
     assert time.monotonic() - t0 < 4.0
     out = tmp_path / "x.csv"
     rc = main(["capture", "--port", str(tmp_path / "ttyNOPE"), "--protocol", "text",
-               "--out", str(out)])
+               "-o", str(out)])
     assert rc == 1
     assert "does not exist" in capsys.readouterr().err
     assert not out.exists()
@@ -450,10 +450,10 @@ def test_request_byte_forms():
         parse_request_byte("0x1FF")
 
 
-def test_readme_capture_section_names_the_command():
-    from conftest import readme_section
+def test_capture_page_names_the_command():
+    from conftest import doc_page
 
-    section = readme_section("Capture")
+    section = doc_page("guide/capture.md")
     assert "triaxcal capture --port" in section and "triaxcal demo" in section
 
 
@@ -502,7 +502,7 @@ def test_capture_from_the_emulated_avr_firmware(tmp_path, capsys):
         for protocol in ("binary", "framed", "text"):
             out = tmp_path / f"{protocol}.csv"
             rc = main(["capture", "--port", port, "--protocol", protocol, "--channels", "7",
-                       "--samples", "60", "--out", str(out), "--quiet"])
+                       "--samples", "60", "-o", str(out), "--quiet"])
             assert rc == 0, capsys.readouterr().err
             cols, data = read_session(out)
             assert cols == ("t", *sim.CHANNELS_7) and len(data) == 60

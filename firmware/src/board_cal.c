@@ -60,7 +60,7 @@ static uint8_t store(const uint8_t b[TC_STORE_BYTES])
     return same && cal_ok;
 }
 
-/* The seed's search for the centre of the sphere of radius CAL_RADIUS, into q. */
+/* The sphere-centre method's search for the centre of the sphere of radius CAL_RADIUS, into q. */
 static void descend(const tc_real (*pts)[3], struct proto_quality *q)
 {
     struct tc_descent_options o;

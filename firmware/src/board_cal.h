@@ -1,7 +1,7 @@
-/* The board calibrates itself (mode 'S' end to end, the seed's sensors_calibrate_program):
+/* The board calibrates itself (mode 'S' end to end, the sphere-centre method's sensors_calibrate_program):
  * the accelerometer means of the poses the still detector registers go into a pose buffer
  * (tc_poses) of CAL_POSES; after the 84th pose (or on the command 'c') the board runs
- * the seed's centre search and the offset + 3 gains fit of the triaxcal library, stores the
+ * the sphere-centre method's centre search and the offset + 3 gains fit of the triaxcal library, stores the
  * fit as a record with version and CRC (tc_store.h) in non-volatile storage (nvstore.h), and
  * from then on applies it to the accelerometer counts of the streams ('A' / 'a' switch it on
  * and off). Calibrated counts are at the nominal scale: CAL_RADIUS counts per g.
@@ -15,7 +15,7 @@
 #include "still.h"
 #include "triaxcal_config.h"
 
-#define CAL_AUTO_POSES 84 /* the seed's globe: fit after this many poses */
+#define CAL_AUTO_POSES 84 /* the sphere-centre method's globe: fit after this many poses */
 #ifndef CAL_POSES
 /* Poses held (12 bytes of RAM each): the ATmega328P's 2 KB hold 60 beside the protocol, the
  * still detector and the deepest stack of a fit (firmware/README.md). The globe's 84 repeat

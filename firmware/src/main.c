@@ -122,7 +122,7 @@ static void pose_step(uint16_t now)
     if (ev & STILL_EV_POSE) {
         proto_send_pose(still_pose(), TRIAXCAL_CHANNELS);
         buzzer_beep(still_settings()->beep_ms);
-        if (cal_pose(still_pose())) fit_now(); /* the 84th pose: the seed's program ends */
+        if (cal_pose(still_pose())) fit_now(); /* the 84th pose: the sphere-centre method's program ends */
     }
     if ((ev & STILL_EV_POSE) ||
         ((ev & STILL_EV_WINDOW) && (uint16_t)(now - last_status) >= STILL_STATUS_MS)) {

@@ -89,12 +89,12 @@ enum proto_event {
 /* The 'Q' frame: what the board's fit gave (board_cal.h). */
 struct proto_quality {
     int8_t code;         /* enum tc_code of the fit: 0 fitted (and stored) */
-    int8_t descent_code; /* enum tc_code of the seed's centre search */
+    int8_t descent_code; /* enum tc_code of the sphere-centre method's centre search */
     uint16_t warnings;   /* TC_WARN_* */
     uint16_t n;          /* poses fitted */
     uint8_t iterations;  /* passes of the fit */
     uint16_t descent_iterations;
-    float center[3];     /* the seed's centre (raw counts) */
+    float center[3];     /* the sphere-centre method's centre (raw counts) */
     float rms;           /* RMS of |calibrated| - radius, calibrated counts */
     float spread;        /* coverage: 1/3 even, below 0.1 a band */
     uint8_t faces[6];    /* poses nearest +X -X +Y -Y +Z -Z */

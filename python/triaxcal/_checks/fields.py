@@ -26,8 +26,11 @@ import numpy as np
 
 from ..errors import CalibrationError
 
-#: Largest calibration file read, in bytes (the statistics of a million-point fit fit easily).
-MAX_FILE_BYTES = 64 * 1024 * 1024
+#: Largest calibration file read, in bytes: 16 MiB. A calibration file is a few kB (a
+#: million-point fit's statistics are summaries, not the points); reading and checking every
+#: value of a file takes about a second per MB, so a bound far above any real file keeps a
+#: hostile one from taking minutes and gigabytes.
+MAX_FILE_BYTES = 16 * 1024 * 1024
 #: Deepest nesting of JSON arrays/objects accepted anywhere in a calibration file.
 MAX_DEPTH = 32
 #: Most decimal digits of a JSON integer (a float64 holds about 17 significant digits).

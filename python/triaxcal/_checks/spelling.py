@@ -37,6 +37,14 @@ _FLAGS = {
     "holdoff_s": "--holdoff",
     "offsets_only": "--offsets-only",
     "counts_per_unit": "--counts-per-unit",
+    "angle_deg": "--angle",
+    "rest_s": "--rest",
+    "offset": "--bias",
+    "gyro_offset": "--bias",
+    "nominal_counts_per_dps": "--counts-per-unit",
+    "require_both_directions": "--both-directions",
+    "min_still_s": "--min-still",
+    "max_asymmetry_pct": "--max-asymmetry",
 }
 
 _MISSING = object()
@@ -57,10 +65,11 @@ def command_line() -> Iterator[None]:
         _CLI.reset(token)
 
 
-def opt(name: str, value: Any = _MISSING) -> str:
-    """The option ``name`` (its Python name), with ``value`` if given, as the user wrote it."""
+def opt(name: str, value: Any = _MISSING, *, flag: str | None = None) -> str:
+    """The option ``name`` (its Python name), with ``value`` if given, as the user wrote it;
+    ``flag`` names its command-line spelling where that is not the name with dashes."""
     if _CLI.get():
-        flag = _FLAGS.get(name, "--" + name.replace("_", "-"))
+        flag = flag or _FLAGS.get(name, "--" + name.replace("_", "-"))
         if value is _MISSING:
             return flag
         if value is True:

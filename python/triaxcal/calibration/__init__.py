@@ -21,9 +21,12 @@ from .part import MAX_PREVIOUS, SensorCalibration, TemperatureTerms, sha256_poin
 from .parts import (
     fold_asa,
     part_from_center,
+    part_from_ferraris,
     part_from_gyro_gains,
+    part_from_imu,
     part_from_temperature,
     part_from_tilt_rig,
+    part_from_turntable,
     part_from_yaw,
 )
 from .request import FieldOptions, FitRequest, SourceOptions
@@ -50,8 +53,11 @@ __all__ = [
     "fit_to_file",
     "fold_asa",
     "part_from_center",
+    "part_from_ferraris",
     "part_from_gyro_gains",
+    "part_from_imu",
     "part_from_temperature",
     "part_from_tilt_rig",
+    "part_from_turntable",
     "part_from_yaw",
 ]

@@ -192,8 +192,9 @@ class Calibration:
 
         Every value is validated (see :mod:`triaxcal.calibration.schema`): numbers are finite
         numbers, the matrix is invertible, the model is a known name, text is bounded and free of
-        control characters. Anything else -- a folder, a file that is not UTF-8 JSON, one
-        larger than 64 MB, nested too deeply -- raises :class:`CalibrationError`.
+        control characters. Anything else -- a folder, a pipe or a device (only a regular file
+        is read), a file that is not UTF-8 JSON, one larger than 16 MiB
+        (``MAX_FILE_BYTES``), nested too deeply -- raises :class:`CalibrationError`.
         """
         p = Path(path)
         data = read_bounded(p, limit=_schema.MAX_FILE_BYTES, what="calibration file")

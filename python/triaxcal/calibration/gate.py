@@ -26,10 +26,11 @@ direction-only          the readings all have one length (a driver that publishe
 gains                   raw and calibrated units measure the same quantity and a gain lies
                         outside ArduPilot's acceptance bounds (``PHYSICAL_DIAG``), or the gains
                         differ by more than ``CORE["MAX_AXIS_RATIO"]`` between axes
-offset                  the accelerometer's offset exceeds ``MAX_ACCEL_OFFSET_G``; the
-                        magnetometer's exceeds ArduPilot's ``COMPASS_OFFS_MAX`` (raw field
-                        units; raw counts have no absolute bound: a tumble determines any
-                        offset)
+offset                  the accelerometer's offset exceeds ``MAX_ACCEL_OFFSET_G`` (raw
+                        counts of an unsigned ADC: from its mid-scale code,
+                        ``ADC_MIDSCALE_COUNTS``); the magnetometer's exceeds ArduPilot's
+                        ``COMPASS_OFFS_MAX`` (raw field units; raw counts have no absolute
+                        bound: a tumble determines any offset)
 yaw-only                the calibrated headings leave an arc wider than
                         ``MAX_YAW_HEADING_GAP_DEG`` unvisited, the residual exceeds
                         ``MAX_RESIDUAL_PCT``, or the hard iron is more than
@@ -184,6 +185,18 @@ def _gain_reasons(part: SensorCalibration, sensor: str) -> list[str]:
     return why
 
 
+def _adc_zero(part: SensorCalibration) -> float:
+    """The mid-scale code of an offset-binary ADC nearest the offset of a part in raw counts
+    whose three offsets lie within a quarter of that code of it (0 otherwise)."""
+    if part.raw_unit != "counts":
+        return 0.0
+    off = np.asarray(part.offset, dtype=np.float64)
+    for mid in B.ADC_MIDSCALE_COUNTS:
+        if np.all(np.abs(off - mid) < 0.25 * mid):
+            return mid
+    return 0.0
+
+
 def _offset_reasons(part: SensorCalibration, sensor: str) -> list[str]:
     why: list[str] = []
     cal_off = part.matrix @ part.offset  # the offset in calibrated units
@@ -195,6 +208,9 @@ def _offset_reasons(part: SensorCalibration, sensor: str) -> list[str]:
         else:
             return why
         worst = float(np.max(np.abs(cal_off)))
+        zero = _adc_zero(part)
+        if zero:  # an unsigned ADC: 0 g reads mid-scale, the offset counts from there
+            worst = min(worst, float(np.max(np.abs(part.matrix @ (part.offset - zero)))))
         if worst > lim:
             why.append(f"its offset reaches {worst:.4g} {part.unit} on one axis (at most "
                        f"{lim:.4g} {part.unit}, 1 g: ArduPilot's bound; MEMS offsets are tens "

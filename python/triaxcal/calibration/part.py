@@ -16,6 +16,7 @@ or False with ``invalid_reasons`` when it was written anyway (``--force``).
 
 from __future__ import annotations
 
+import contextvars
 import datetime as _dt
 import hashlib
 import math
@@ -36,6 +37,11 @@ __all__ = ["MAX_PREVIOUS", "SensorCalibration", "TemperatureTerms", "sha256_poin
 
 #: Most summaries of replaced calibrations a part keeps (newest first).
 MAX_PREVIOUS = _schema.MAX_PREVIOUS
+
+#: Set while :meth:`SensorCalibration.from_dict` builds a part from values it has just checked
+#: (free-form ``stats`` are checked once, not twice: they can be megabytes).
+_CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("triaxcal_part_checked",
+                                                                default=False)
 
 _AXES = AXES
 _UPPER = UPPER  # xy, xz, yz
@@ -209,7 +215,8 @@ class SensorCalibration:
             object.__setattr__(self, "temperature", TemperatureTerms.from_dict(self.temperature))
         if not isinstance(self.stats, Mapping):
             raise CalibrationError(f"stats must be a mapping, got {type(self.stats).__name__}")
-        object.__setattr__(self, "stats", _schema.stats_object(dict(self.stats), "stats"))
+        if not _CHECKED.get():  # from_dict has just checked them: not twice
+            object.__setattr__(self, "stats", _schema.stats_object(dict(self.stats), "stats"))
         prev = self.previous
         if isinstance(prev, (str, bytes, Mapping)) or not isinstance(prev, (list, tuple)):
             raise CalibrationError("previous must be a list of summaries (newest first)")
@@ -550,26 +557,30 @@ class SensorCalibration:
             m[j, i] = lower[k]
         _schema.check_matrix(m, what)
         temp = v.get("temperature")
+        kw = dict(
+            offset=v["offset"],
+            matrix=m,
+            raw_unit=v["raw_unit"],
+            unit=v["unit"],
+            radius=v.get("radius"),
+            model=v.get("model"),
+            temperature=None if temp is None else TemperatureTerms(**temp),
+            stats=v.get("stats") or {},
+            input_sha256=v.get("input_sha256"),
+            source=v.get("source"),
+            previous=v.get("previous") or (),
+            expected_field=v.get("expected_field"),
+            alignment=v.get("alignment"),
+            valid=v.get("valid"),
+            invalid_reasons=tuple(v.get("invalid_reasons") or ()),
+        )
+        token = _CHECKED.set(True)
         try:
-            return cls(
-                offset=v["offset"],
-                matrix=m,
-                raw_unit=v["raw_unit"],
-                unit=v["unit"],
-                radius=v.get("radius"),
-                model=v.get("model"),
-                temperature=None if temp is None else TemperatureTerms(**temp),
-                stats=v.get("stats") or {},
-                input_sha256=v.get("input_sha256"),
-                source=v.get("source"),
-                previous=v.get("previous") or (),
-                expected_field=v.get("expected_field"),
-                alignment=v.get("alignment"),
-                valid=v.get("valid"),
-                invalid_reasons=tuple(v.get("invalid_reasons") or ()),
-            )
+            return cls(**kw)
         except CalibrationError as exc:
             raise CalibrationError(f"{what}: {exc}") from None
+        finally:
+            _CHECKED.reset(token)
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, SensorCalibration) and self.to_dict() == other.to_dict()

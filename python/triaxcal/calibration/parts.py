@@ -1,6 +1,6 @@
-"""Calibration-file parts from the seed methods' results.
+"""Calibration-file parts from the methods' results.
 
-Each seed method returns its own small result (:class:`~triaxcal.fit.Descent`,
+Each method returns its own small result (:class:`~triaxcal.fit.Descent`,
 :class:`~triaxcal.methods.static.TiltRig`, :class:`~triaxcal.methods.gyro.GyroGains`,
 :class:`~triaxcal.methods.temperature.TemperatureModel`); the functions here turn one into a
 :class:`~triaxcal.calibration.SensorCalibration`, the part a calibration file holds, in the
@@ -13,10 +13,20 @@ sphere centre ``c``, radius  ``offset = c``; ``matrix = (scale_to / R) * I`` (R 
 ``R`` (raw units)            are ``scale_to`` calibrated units), or ``I`` (offset only)
 tilt rig                    ``offset``; ``matrix = diag(gain)`` (gain multiplies, g per raw)
 gyro gains                  ``offset``; ``matrix = diag(1 / gain_counts_per_dps)`` (the
-                            gains divide, so the matrix holds their inverses), deg/s
+                            gains divide, so the matrix holds their inverses), deg/s; an
+                            axis not turned keeps the existing part's row or the nominal
 temperature model           ``offset = offset(T_ref)``, ``offset_poly`` the drift; the
                             matrix of an existing part is kept
+Ferraris, Tedaldi (imu)     two parts, ``accel`` and ``gyro``: each triad's offset and
+                            matrix (accelerometer in the unit of ``gravity``, gyroscope in
+                            rad/s); the gyroscope's g-sensitivity goes into its stats
+turntable                   the bias and the symmetric matrix, in the unit of the rates
 ==========================  ==========================================================
+
+A part holds ``(raw - offset) @ matrix.T`` and nothing else: the g-sensitivity of the
+Ferraris and Tedaldi gyroscope models (``K_ga``, raw units per unit of calibrated
+acceleration) is recorded in the gyroscope part's ``stats["g_sensitivity"]`` but not applied
+by the part or the exports; use the method's own ``apply_gyro`` where it matters.
 
 Every part records the method and its inputs in ``stats`` (``method``, ...), so that a file
 says how each number was made, and passes the validity gate (:mod:`triaxcal.calibration.gate`):
@@ -32,18 +42,24 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
+from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
 from .gate import check_part, judged
 from .part import SensorCalibration, TemperatureTerms
 
 __all__ = [
+    "part_from_factory",
     "part_from_autocal",
     "part_from_yaw",
     "fold_asa",
     "part_from_center",
+    "part_from_ferraris",
     "part_from_gyro_gains",
+    "part_from_imu",
     "part_from_temperature",
     "part_from_tilt_rig",
+    "part_from_turntable",
 ]
 
 
@@ -67,7 +83,7 @@ def part_from_center(
     input_sha256: str | None = None,
     force: bool = False,
 ) -> SensorCalibration:
-    """A part from the centre of a sphere of known radius (the seed's zero offset).
+    """A part from the centre of a sphere of known radius (the sphere-centre zero offset).
 
     Parameters
     ----------
@@ -169,8 +185,10 @@ def part_from_tilt_rig(
 
 def part_from_gyro_gains(
     gains: Any,
+    base: SensorCalibration | None = None,
     *,
     raw_unit: str = "counts",
+    nominal_counts_per_dps: float | None = None,
     stats: Mapping[str, Any] | None = None,
     source: str | None = None,
     input_sha256: str | None = None,
@@ -178,8 +196,15 @@ def part_from_gyro_gains(
 ) -> SensorCalibration:
     """A gyroscope part from :func:`~triaxcal.gyro_gains`: calibrated rates in deg/s.
 
-    The gains are counts per deg/s and **divide** (the seed's ``(raw - offset) / gain``); the
+    The gains are counts per deg/s and **divide** (the turn-integration method's ``(raw - offset) /
+    gain``); the
     part's matrix **multiplies**, so it holds ``diag(1 / gain)``.
+
+    An axis the recording did not turn about (``gyro_gains(..., axes="z")``: NaN gains) keeps
+    its row of ``base`` (the gyroscope part already in the calibration file, from the turns
+    about the other axes; same raw unit, any rate unit), or else takes the datasheet gain
+    ``nominal_counts_per_dps``; without either the part is refused. ``stats["gain_from"]``
+    says which, per axis. The offset is the one measured (every axis's bias is).
 
     Examples
     --------
@@ -190,10 +215,46 @@ def part_from_gyro_gains(
     ...                     angle_deg=90.0, rotations=(), missing=())
     >>> part_from_gyro_gains(g).apply([[50.0 + 164.0, -20.0, 5.0]]).round(9).tolist()
     [[10.0, 0.0, 0.0]]
+    >>> nan = float("nan")  # turns about z only: x and y at the datasheet's 16.4
+    >>> z = SimpleNamespace(**{**vars(g), "gain_counts_per_dps": [nan, nan, 16.0]})
+    >>> part = part_from_gyro_gains(z, nominal_counts_per_dps=16.4)
+    >>> part.apply([[50.0 + 164.0, -20.0, 5.0 + 160.0]]).round(9).tolist(), part.stats["gain_from"]
+    ([[10.0, 0.0, 10.0]], ['nominal', 'nominal', 'turns'])
     """
-    gain = _finite3(gains.gain_counts_per_dps, "gain_counts_per_dps (an axis without a turn?)")
+    gain = np.asarray(gains.gain_counts_per_dps, dtype=np.float64).reshape(-1)
+    if gain.shape != (3,) or np.isinf(gain).any() or not np.isfinite(gain).any():
+        raise CalibrationError(f"gain_counts_per_dps must hold 3 gains (NaN for an axis not "
+                               f"turned, at least one finite), got {gain.tolist()}")
     if np.any(gain == 0):
         raise CalibrationError(f"a gyro gain is zero: {gain.tolist()}")
+    measured = np.isfinite(gain)
+    matrix = np.diag(1.0 / np.where(measured, gain, 1.0))
+    gain_from = ["turns" if m else "" for m in measured]
+    usable = (base is not None and base.raw_unit == raw_unit
+              and UNITS.get(base.unit, ("",))[0] == "gyro")
+    nominal = None
+    if nominal_counts_per_dps is not None:
+        nominal = float(nominal_counts_per_dps)
+        if not (math.isfinite(nominal) and nominal > 0):
+            raise CalibrationError(f"{opt('nominal_counts_per_dps')} must be a gain > 0 "
+                                   f"(counts per deg/s), got {nominal_counts_per_dps!r}")
+    for i in np.flatnonzero(~measured):
+        if usable:
+            assert base is not None
+            matrix[i] = np.asarray(base.matrix)[i] * unit_factor(base.unit, "deg/s")
+            gain_from[i] = "existing part"
+        elif nominal is not None:
+            matrix[i] = np.eye(3)[i] / nominal
+            gain_from[i] = "nominal"
+    lacking = ["xyz"[i] for i in range(3) if not gain_from[i]]
+    if lacking:
+        turned = ", ".join("xyz"[i] for i in np.flatnonzero(measured))
+        raise CalibrationError(
+            f"no gain for {', '.join(lacking)}: the turns were about {turned} only. Give the "
+            "datasheet gain for "
+            f"the others ({opt('nominal_counts_per_dps')}), or calibrate them first into the "
+            "same calibration file (its gyroscope part keeps them)"
+        )
 
     def listed(v: Any) -> list[float | None]:
         return [None if not math.isfinite(float(x)) else float(x) for x in v]
@@ -201,17 +262,20 @@ def part_from_gyro_gains(
     st: dict[str, Any] = {
         "method": "gyro-gains",
         "angle_deg": float(gains.angle_deg),
-        "gain_counts_per_dps": [float(v) for v in gain],
+        "gain_counts_per_dps": listed(gain),
         "gain_cw_counts_per_dps": listed(gains.gain_cw_counts_per_dps),
         "gain_ccw_counts_per_dps": listed(gains.gain_ccw_counts_per_dps),
         "asymmetry": listed(gains.asymmetry),
         "rotations": len(gains.rotations),
         "missing": list(gains.missing),
+        "gain_from": gain_from,
     }
+    if nominal is not None:
+        st["nominal_counts_per_dps"] = nominal
     if stats:
         st.update(stats)
     return gated(SensorCalibration(offset=_finite3(gains.offset, "offset"),
-                                   matrix=np.diag(1.0 / gain), raw_unit=raw_unit, unit="deg/s",
+                                   matrix=matrix, raw_unit=raw_unit, unit="deg/s",
                                    model="axis", stats=st, source=source,
                                    input_sha256=input_sha256), "gyro", force=force)
 
@@ -230,7 +294,7 @@ def part_from_temperature(
 
     With ``base`` (the sensor's part already in the file, e.g. from ``gyro-gains``), its
     matrix, units and radius are kept and its offset is replaced by the model's offset at the
-    reference temperature, the drift going into ``offset_poly``: the seed's
+    reference temperature, the drift going into ``offset_poly``: the original method's
     ``(raw - (tempcomp * dT + offset)) / gain``. Without ``base`` the part is
     :meth:`SensorCalibration.from_temperature_model` (counts in, counts out).
 
@@ -272,6 +336,176 @@ def part_from_temperature(
     return gated(SensorCalibration(**{**_fields(base), "offset": oc[0], "temperature": terms,
                                       "stats": {**base.stats, **st}, "source": source,
                                       "input_sha256": input_sha256}), force=force)
+
+
+def _triad_parts(accel: Any, gyro: Any, g_sensitivity: Any, *, method: str, gravity: float,
+                 unit: str, accel_raw_unit: str, gyro_raw_unit: str,
+                 accel_stats: Mapping[str, Any], gyro_stats: Mapping[str, Any],
+                 stats: Mapping[str, Any] | None, source: str | None,
+                 input_sha256: str | None, force: bool) -> dict[str, SensorCalibration]:
+    """The accelerometer and gyroscope parts of a two-triad method, both through the gate."""
+    g = float(gravity)
+    if not (math.isfinite(g) and g > 0):
+        raise CalibrationError(f"gravity must be > 0 (in {unit}), got {gravity!r}")
+    if UNITS.get(unit, ("",))[0] != "accel":
+        raise CalibrationError(f"the accelerometer's unit must be one of acceleration (g, "
+                               f"m/s^2), got {unit!r}")
+    k_ga = np.asarray(g_sensitivity, dtype=np.float64)
+    common = dict(stats or {})
+    a_st = {"method": method, **common, **accel_stats}
+    g_st = {"method": method, **common, **gyro_stats,
+            "g_sensitivity": k_ga.tolist(),
+            "g_sensitivity_unit": f"{gyro_raw_unit} per {unit} (not applied by the part)"}
+    parts = {
+        "accel": SensorCalibration(offset=_finite3(accel.offset, "accel offset"),
+                                   matrix=np.asarray(accel.matrix, dtype=np.float64),
+                                   raw_unit=accel_raw_unit, unit=unit, radius=g, model=method,
+                                   stats=a_st, source=source, input_sha256=input_sha256),
+        "gyro": SensorCalibration(offset=_finite3(gyro.offset, "gyro offset"),
+                                  matrix=np.asarray(gyro.matrix, dtype=np.float64),
+                                  raw_unit=gyro_raw_unit, unit="rad/s", model=method,
+                                  stats=g_st, source=source, input_sha256=input_sha256),
+    }
+    # judge both before returning either: nothing is written unless both pass (or force)
+    verdicts = {k: check_part(p, k) for k, p in parts.items()}
+    for k, v in verdicts.items():
+        if not v.valid and not force:
+            judged(parts[k], v)  # raises InvalidCalibrationError, naming the sensor
+    return {k: judged(p, verdicts[k], force=force) for k, p in parts.items()}
+
+
+def part_from_ferraris(
+    fer: Any,
+    *,
+    gravity: float,
+    unit: str,
+    accel_raw_unit: str = "counts",
+    gyro_raw_unit: str = "counts",
+    stats: Mapping[str, Any] | None = None,
+    source: str | None = None,
+    input_sha256: str | None = None,
+    force: bool = False,
+) -> dict[str, SensorCalibration]:
+    """The ``accel`` and ``gyro`` parts of a :func:`~triaxcal.ferraris` calibration.
+
+    Parameters
+    ----------
+    fer : FerrarisCalibration
+    gravity, unit : float, str
+        The ``gravity`` given to :func:`~triaxcal.ferraris` and its unit (9.81 and ``"m/s^2"``,
+        or 1 and ``"g"``): the accelerometer part's unit and radius.
+    accel_raw_unit, gyro_raw_unit : str
+        Units of the readings (counts; imucal's continuous session: m/s^2 and deg/s).
+    stats, source, input_sha256, force
+        As for the other parts; ``stats`` go into both.
+
+    Returns
+    -------
+    dict
+        ``{"accel": part, "gyro": part}``; the gyroscope's in rad/s, its g-sensitivity in its
+        stats (see the module notes). Both are judged before either is returned: a refused one
+        raises unless ``force``.
+
+    Examples
+    --------
+    >>> import numpy as np, triaxcal as tc
+    >>> off, n = np.array([10.0, -20.0, 30.0]), 200
+    >>> still = lambda v: (np.tile(off + 2048 * np.array(v), (n, 1)), np.zeros((n, 3)))
+    >>> spin = lambda i: (np.tile(off + 2048 * np.eye(3)[i], (n, 1)),
+    ...                   np.tile(16.4 * 180 * np.eye(3)[i], (n, 1)))
+    >>> sec = {"x_p": still([1, 0, 0]), "x_a": still([-1, 0, 0]), "y_p": still([0, 1, 0]),
+    ...        "y_a": still([0, -1, 0]), "z_p": still([0, 0, 1]), "z_a": still([0, 0, -1]),
+    ...        "x_rot": spin(0), "y_rot": spin(1), "z_rot": spin(2)}
+    >>> parts = part_from_ferraris(tc.ferraris(sec, rate_hz=100.0, gravity=1.0), gravity=1.0,
+    ...                            unit="g")
+    >>> parts["accel"].apply([off + [0, 0, 2048]]).round(9).tolist()
+    [[0.0, 0.0, 1.0]]
+    >>> np.degrees(parts["gyro"].apply([[16.4, 0, 0]])).round(9).tolist()
+    [[1.0, 0.0, 0.0]]
+    """
+    return _triad_parts(
+        fer.accel, fer.gyro, fer.g_sensitivity, method="ferraris", gravity=gravity, unit=unit,
+        accel_raw_unit=accel_raw_unit, gyro_raw_unit=gyro_raw_unit,
+        accel_stats={"accel_counts_per_g": [float(v) for v in fer.accel_counts_per_g]},
+        gyro_stats={"gyro_counts_per_dps": [float(v) for v in fer.gyro_counts_per_dps],
+                    "rotation_sign": [float(v) for v in fer.rotation_sign]},
+        stats=stats, source=source, input_sha256=input_sha256, force=force)
+
+
+def part_from_imu(
+    imu: Any,
+    *,
+    gravity: float,
+    unit: str,
+    accel_raw_unit: str = "counts",
+    gyro_raw_unit: str = "counts",
+    stats: Mapping[str, Any] | None = None,
+    source: str | None = None,
+    input_sha256: str | None = None,
+    force: bool = False,
+) -> dict[str, SensorCalibration]:
+    """The ``accel`` and ``gyro`` parts of a :func:`~triaxcal.calibrate_imu` calibration
+    (Tedaldi's multi-position method); the arguments and result as for
+    :func:`part_from_ferraris`. The stats record the still poses, the threshold the sweep
+    chose, the accelerometer's residual and the gyro fit's gravity-direction residual."""
+    return _triad_parts(
+        imu.accel, imu.gyro, imu.gyro_g_sensitivity, method="imu", gravity=gravity, unit=unit,
+        accel_raw_unit=accel_raw_unit, gyro_raw_unit=gyro_raw_unit,
+        accel_stats={"accel_model": imu.accel_model, "n_poses": len(imu.intervals),
+                     "k": float(imu.k), "rms": float(imu.accel_rms),
+                     "rms_pct_of_radius": 100.0 * float(imu.accel_rms) / float(gravity)},
+        gyro_stats={"n_moves": int(imu.n_moves), "gyro_rms_deg": float(imu.gyro_rms_deg),
+                    "gyro_rms_deg_before": float(imu.gyro_rms_deg_before),
+                    "iterations": int(imu.gyro_iterations)},
+        stats=stats, source=source, input_sha256=input_sha256, force=force)
+
+
+def part_from_turntable(
+    fit: Any,
+    *,
+    unit: str = "rad/s",
+    raw_unit: str = "counts",
+    scale: float = 1.0,
+    stats: Mapping[str, Any] | None = None,
+    source: str | None = None,
+    input_sha256: str | None = None,
+    force: bool = False,
+) -> SensorCalibration:
+    """A gyroscope part from :func:`~triaxcal.fit_turntable`: the bias and the symmetric matrix
+    (it multiplies) times ``scale``, in ``unit``: the unit the table's rates were given in
+    times ``scale`` (a fit whose rates were in raw units, where its plateaus are found, times
+    ``unit`` per raw unit).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from types import SimpleNamespace
+    >>> fit = SimpleNamespace(offset=[0.01, 0, 0], matrix=np.eye(3) * 1.01, rates=[3.49],
+    ...                       measured=[3.49], rel_error=[0.0], n_plateaus=(20,), rms_rel=1e-3)
+    >>> part_from_turntable(fit, raw_unit="rad/s").apply([[1.01, 0, 0]]).round(9).tolist()
+    [[1.01, 0.0, 0.0]]
+    """
+    if UNITS.get(unit, ("",))[0] != "gyro":
+        raise CalibrationError(f"the turntable's rates must be in a rate unit (rad/s, deg/s), "
+                               f"got {unit!r}")
+    k = float(scale)
+    if not (math.isfinite(k) and k > 0):
+        raise CalibrationError(f"scale must be > 0 ({unit} per unit of the rates), got {scale!r}")
+    st: dict[str, Any] = {
+        "method": "turntable",
+        "rates": [float(v) * k for v in fit.rates],
+        "measured": [float(v) * k for v in fit.measured],
+        "rel_error": [float(v) for v in fit.rel_error],
+        "n_plateaus": [int(v) for v in fit.n_plateaus],
+        "rms_rel": float(fit.rms_rel),
+    }
+    if stats:
+        st.update(stats)
+    return gated(SensorCalibration(offset=_finite3(fit.offset, "offset"),
+                                   matrix=np.asarray(fit.matrix, dtype=np.float64) * k,
+                                   raw_unit=raw_unit, unit=unit, model="turntable", stats=st,
+                                   source=source, input_sha256=input_sha256), "gyro",
+                 force=force)
 
 
 def part_from_yaw(y: Any, *, force: bool = False, **kw: Any) -> SensorCalibration:
@@ -339,8 +573,6 @@ def fold_asa(part: SensorCalibration, asa: Any) -> SensorCalibration:
 def _sensor_of(part: SensorCalibration, sensor: str | None) -> str | None:
     if sensor is not None:
         return sensor
-    from ..conventions.units import UNITS
-
     q = UNITS.get(part.unit, (None,))[0]
     return q if q in ("accel", "gyro", "mag") else None
 
@@ -380,3 +612,12 @@ def part_from_autocal(cal: Any, *, source: str | None = None, force: bool = Fals
                              unit="g", radius=1.0, model="autocal-vanhees",
                              temperature=temp, stats=stats, source=source)
     return gated(part, "accel", force=force)
+
+
+def part_from_factory(factory: Any) -> SensorCalibration:
+    """A maker's calibration from a file header (:class:`triaxcal.io.wearables.
+    FactoryCalibration`) as a part: counts -> g, ``matrix = diag(diag)``. It is the maker's
+    own calibration, recorded as it is (model ``"factory"``), not judged by the gate."""
+    return SensorCalibration(offset=factory.offset, matrix=np.diag(factory.diag),
+                             raw_unit="counts", unit="g", radius=1.0, model="factory",
+                             stats={"calibration_date": factory.date}, source=factory.source)

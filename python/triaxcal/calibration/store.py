@@ -6,15 +6,17 @@ Save all write through :func:`store_part`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .._checks.spelling import opt
 from ..errors import CalibrationError
 from .file import Calibration
 from .part import SensorCalibration
 
-__all__ = ["Stored", "existing_calibration", "store_part"]
+__all__ = ["Stored", "existing_calibration", "store_part", "store_parts"]
 
 
 @dataclass(frozen=True)
@@ -28,9 +30,9 @@ class Stored:
 
 def _check_path(path: Path) -> None:
     if path.is_dir():
-        raise CalibrationError(f"-o {path} is a folder: give a file name, e.g. {path}/cal.json")
+        raise CalibrationError(f"{path} is a folder: give a file name, e.g. {path}/cal.json")
     if not path.parent.exists():
-        raise CalibrationError(f"-o {path}: the folder {path.parent} does not exist")
+        raise CalibrationError(f"cannot write {path}: the folder {path.parent} does not exist")
 
 
 def existing_calibration(path: str | Path, *, new: bool = False) -> Calibration | None:
@@ -45,7 +47,8 @@ def existing_calibration(path: str | Path, *, new: bool = False) -> Calibration 
         return Calibration.load(p)
     except CalibrationError as exc:
         raise CalibrationError(
-            f"{p} exists but is not a calibration file ({exc}); pass --new to replace it"
+            f"{p} exists but is not a calibration file ({exc}); pass {opt('new', True)} to "
+            "replace it"
         ) from None
 
 
@@ -63,6 +66,20 @@ def store_part(
     part it had for ``sensor`` is summarised in the new part's ``previous``, also with
     ``new=True``, so that ``triaxcal diff`` and the report can say what changed.
     """
+    return store_parts(path, {sensor: part}, new=new, sensor_id=sensor_id)
+
+
+def store_parts(
+    path: str | Path,
+    parts: Mapping[str, SensorCalibration],
+    *,
+    new: bool = False,
+    sensor_id: str | None = None,
+) -> Stored:
+    """Write several parts (``{"accel": ..., "gyro": ...}``: a method that calibrates two
+    sensors at once) into ``path`` in one write, each as :func:`store_part` writes one."""
+    if not parts:
+        raise CalibrationError("no part to write")
     p = Path(path)
     _check_path(p)
     cal = existing_calibration(p, new=new)
@@ -72,14 +89,15 @@ def store_part(
             old = Calibration.load(p)
         except CalibrationError:
             old = None
-    if old is not None and getattr(old, sensor) is not None:
-        part = part.with_previous(old.part(sensor), created_utc=old.created_utc)
+    changes: dict[str, Any] = {}
+    for sensor, part in parts.items():
+        if old is not None and getattr(old, sensor) is not None:
+            part = part.with_previous(old.part(sensor), created_utc=old.created_utc)
+        changes[sensor] = part
     if cal is None:
-        parts: dict[str, Any] = {sensor: part}
-        cal = Calibration(**parts, sensor_id=sensor_id or "")
+        cal = Calibration(**changes, sensor_id=sensor_id or "")
         verb = "wrote"
     else:
-        changes: dict[str, Any] = {sensor: part}
         if sensor_id is not None:
             changes["sensor_id"] = sensor_id
         cal = cal.replace(**changes)

@@ -17,7 +17,8 @@ from ._help import PlainHelpFormatter, missing_required
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ("demo", "capture", "fit", "batch", "export", "report", "send", "sphere_center",
-            "tilt_rig", "gyro_gains", "temperature", "noise", "diff", "board")
+            "tilt_rig", "gyro_gains", "temperature", "ferraris", "imu", "turntable", "noise",
+            "diff", "board")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from ..calibration.part import SensorCalibration
-from ..calibration.store import existing_calibration, store_part
+from ..calibration.store import existing_calibration, store_part, store_parts
 
 
 def add_output_options(p: argparse.ArgumentParser) -> None:
@@ -17,7 +18,7 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", required=True, metavar="CAL.json",
                    help="calibration file to write; an existing one keeps its other sensors")
     p.add_argument("--new", action="store_true",
-                   help="overwrite CAL.json instead of adding this sensor to it")
+                   help="overwrite CAL.json instead of adding to it")
     p.add_argument("--sensor-id", default=None, help="board / sensor id to record")
     p.add_argument("--force", action="store_true",
                    help="write the part even when the validity gate refuses it (marked "
@@ -34,6 +35,11 @@ def save_part(args: Any, sensor: str, part: SensorCalibration) -> str:
     """Write ``part`` (already through the gate) as ``sensor`` into ``args.output``; returns
     "wrote" or "updated"."""
     return store_part(args.output, sensor, part, new=args.new, sensor_id=args.sensor_id).verb
+
+
+def save_parts(args: Any, parts: Mapping[str, SensorCalibration]) -> str:
+    """Write several parts (already through the gate) into ``args.output`` in one write."""
+    return store_parts(args.output, parts, new=args.new, sensor_id=args.sensor_id).verb
 
 
 def file_sha256(path: str | Path) -> str:

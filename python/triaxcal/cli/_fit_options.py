@@ -150,7 +150,7 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="hold a parameter at a value instead of fitting it (repeatable): "
                         "offset_x/y/z in raw units, gain_x/y/z (or gain for the sphere model) "
                         "in calibrated units per raw unit -- with --radius 16384 a gain of 1 "
-                        "means unchanged counts, as in the seed's spreadsheet (--fix gain_z=1)")
+                        "means unchanged counts, as in the spreadsheet method (--fix gain_z=1)")
     add_pose_options(p)
     p.add_argument("--skip-bad-lines", action="store_true",
                    help="skip lines of the data file that are not a row of numbers (and count "

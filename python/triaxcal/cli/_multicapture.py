@@ -9,12 +9,13 @@ import sys
 from ..capture.multi import capture_many
 from ..capture.run import channel_names
 from ..errors import CalibrationError
+from .capture import poll_interval_s
 
 
 def run_many(args: argparse.Namespace, channels: int | None) -> int:
-    if args.out is not None:
+    if args.output is not None:
         raise CalibrationError(
-            "several --port: give --out-dir DIR (one session file per board), not --out"
+            "several --port: give --out-dir DIR (one session file per board), not -o/--output"
         )
     if args.out_dir is None:
         raise CalibrationError("several --port: give --out-dir DIR for the session files")
@@ -39,7 +40,7 @@ def run_many(args: argparse.Namespace, channels: int | None) -> int:
             "stream": args.stream,
             "request_byte": args.request_byte,
             "switch_mode": not args.no_mode_byte,
-            "poll_interval_s": 1.0 / args.poll_hz if args.poll_hz else 0.0,
+            "poll_interval_s": poll_interval_s(args),
             "board_poses": getattr(args, "board_settings", None),
         },
         samples=args.samples,

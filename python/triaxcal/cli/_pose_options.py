@@ -13,12 +13,14 @@ import math
 from typing import Any
 
 from ..detect.session import HEAD_ROWS, PoseSettings
+from ._help import renamed
 
 #: The defaults every option takes from (one place: the settings object itself).
 _D = PoseSettings()
 
 
-def _positive_float(text: str) -> float:
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0."""
     try:
         v = float(text)
     except ValueError:
@@ -28,7 +30,8 @@ def _positive_float(text: str) -> float:
     return v
 
 
-def _nonnegative_float(text: str) -> float:
+def nonnegative_float(text: str) -> float:
+    """An argparse type: a finite number >= 0."""
     try:
         v = float(text)
     except ValueError:
@@ -53,7 +56,7 @@ def _threshold(text: str) -> float | str:
     t = text.strip().lower()
     if t in ("auto", "off"):
         return t
-    return _positive_float(text)
+    return positive_float(text)
 
 
 def _hold(text: str) -> int | None:
@@ -80,15 +83,16 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--window", type=positive_int, default=_D.window, metavar="N",
                    help=f"samples per averaging window (default {_D.window}: "
                         f"{_D.window / 100:g} s at 100 Hz)")
-    g.add_argument("--accel-threshold", type=_positive_float, default=_D.accel_threshold_g,
+    g.add_argument("--accel-threshold", type=positive_float, default=_D.accel_threshold_g,
                    metavar="G",
                    help="accelerometer: largest change of a window mean from the previous "
-                        "window, in g (default %(default)s, the seed's rule)")
-    g.add_argument("--counts-per-g", "--units-per-g", dest="counts_per_g",
-                   type=_positive_float, default=None, metavar="C",
+                        "window, in g (default %(default)s, the sphere-centre method's rule)")
+    g.add_argument("--counts-per-g", dest="counts_per_g",
+                   type=positive_float, default=None, metavar="C",
                    help="accelerometer units per g (16384 at +-2 g; 1 for a board that prints "
                         f"g). Default: the median length of the first {HEAD_ROWS} readings, "
                         "taken while the board lies still")
+    renamed(g, "--units-per-g", "--counts-per-g")
     g.add_argument("--gyro-threshold", type=_threshold, default="auto", metavar="COUNTS",
                    help="gyroscope: largest rate away from its bias at rest, in the gyro's raw "
                         "units (counts; 131 counts = 1 deg/s at +-250 deg/s). 'auto' (default): "
@@ -100,12 +104,13 @@ def add_pose_options(p: argparse.ArgumentParser) -> None:
                         "noise; 'off': it does not take part")
     g.add_argument("--hold", type=_hold, default=_D.hold_windows, metavar="W",
                    help="register a pose once it has been still for W windows (the capture's "
-                        "bell, the seed's beep), then average it until the board moves; 'off': "
+                        "bell, the sphere-centre note's beep), then average it until the board "
+                        "moves; 'off': "
                         "decide when the board moves (default %(default)s)")
-    g.add_argument("--holdoff", type=_nonnegative_float, default=_D.holdoff_s, metavar="S",
+    g.add_argument("--holdoff", type=nonnegative_float, default=_D.holdoff_s, metavar="S",
                    help="seconds ignored after each registered pose, to let go of the board "
-                        "(the seed waits 2 s after its beep: --holdoff 2). Default 0")
-    g.add_argument("--rate-hz", type=_positive_float, default=None, metavar="HZ",
+                        "(the sphere-centre note waits 2 s after its beep: --holdoff 2). Default 0")
+    g.add_argument("--rate-hz", type=positive_float, default=None, metavar="HZ",
                    help="samples per second, to turn --holdoff into samples (default: from the "
                         "arrival times, the session's t column)")
 

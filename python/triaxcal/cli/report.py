@@ -1,4 +1,5 @@
-"""``triaxcal report SESSION.csv|LOG|CAL.json [--plot FIG.png]``: how good is a calibration?
+"""``triaxcal report SESSION.csv|LOG|CAL.json [--plot FIG.png] [-o REPORT.json]``: how good is a
+calibration?
 
 With a session / data file: fit it as ``triaxcal fit`` would (same options) and report. With a
 calibration file: report each part on its input data -- the file named in the calibration
@@ -29,13 +30,14 @@ from ..errors import CalibrationError
 from ..fit.ellipsoid import MODELS
 from ..io.files import check_output, write_file
 from ..io.logs import is_log
+from ..io.sections import tilt_points
 from ..io.tables import pick_columns, read_table
-from ..report import QualityReport, context_lines, plot_report, quality_report
+from ..report import QualityReport, plot_report, quality_report
 from ..report.flight import flight_check, flight_text, plot_flight
-from ..report.text import coefficient_table, printable
+from ..report.text import coefficient_table, printable, stored_text, summary_only, summary_text
 from ._calfile import file_sha256
 from ._fit_options import add_field_options, add_fit_options, fit_request
-from ._method_parts import summary_only, summary_text, tilt_points
+from ._help import renamed
 
 
 def register(subparsers: Any) -> None:
@@ -53,8 +55,9 @@ def register(subparsers: Any) -> None:
                         "several sensors, the sensor name is added before .png")
     p.add_argument("--data", dest="data_file", default=None, metavar="FILE",
                    help="with CAL.json: the readings to judge it on")
-    p.add_argument("--json", dest="json_out", default=None, metavar="REPORT.json",
+    p.add_argument("-o", "--output", dest="json_out", default=None, metavar="REPORT.json",
                    help="also write the numbers as JSON")
+    renamed(p, "--json", "--output")
     add_fit_options(p)
     add_field_options(p)
     p.set_defaults(func=run)
@@ -79,27 +82,6 @@ def _find_source(cal_path: Path, part: SensorCalibration) -> Path | None:
         if cand.is_file() or (cand.is_dir() and is_log(cand)):
             return cand
     return None
-
-
-def _stored_text(sensor: str, part: SensorCalibration) -> str:
-    s = part.stats
-    lines = [(f"{sensor} calibration ({part.raw_unit} -> {part.unit}, model {part.model}): "
-             "statistics stored at fit time (pass --data FILE for the full report and figure)")]
-    if "rms" in s:
-        lines.append(f"  residual RMS    {s['rms']:.4g} {part.unit} "
-                     f"({s.get('rms_pct_of_radius', float('nan')):.3g} % of radius)")
-    if "norms" in s:
-        n = s["norms"]
-        lines.append(f"  calibrated |v|  min {n['min']:.6g}  max {n['max']:.6g}  mean "
-                     f"{n['mean']:.6g}  std {n['std']:.4g} {part.unit}")
-    if s.get("coverage_pct") is not None:
-        lines.append(f"  coverage        {s['coverage_pct']:.0f} % of the sphere")
-    if s.get("rejected") is not None:
-        lines.append(f"  outliers        {len(s['rejected'])} rejected")
-    lines += context_lines(part)
-    for w in s.get("warnings", []):
-        lines.append(f"    - {w}")
-    return "\n".join(lines)
 
 
 def _log_report(src: Path, part: SensorCalibration, sensor: str,
@@ -166,12 +148,12 @@ def run(args: argparse.Namespace) -> int:
                 continue
             src = Path(args.data_file) if args.data_file else _find_source(path, part)
             if src is not None and part.model not in MODELS:
-                print(_stored_text(sensor, part).replace(
-                    "(pass --data FILE for the full report and figure)",
-                    f"(model {part.model!r} is not a fit to a sphere: no figure)"))
+                print(stored_text(sensor, part,
+                                  f"model {part.model!r} is not a fit to a sphere: no figure"))
                 continue
             if src is None:
-                print(_stored_text(sensor, part))
+                print(stored_text(sensor, part,
+                                  "pass --data FILE for the full report and figure"))
                 if args.plot:
                     print(f"  (no figure for {sensor}: its data file {part.source!r} was not "
                           "found; pass --data FILE)", file=sys.stderr)
@@ -189,7 +171,8 @@ def run(args: argparse.Namespace) -> int:
                     print(f"  figure: {out}")
                 continue
             if part.stats.get("method") == "tilt-rig":
-                pts, sha = tilt_points(src, part), file_sha256(src)
+                pts = tilt_points(src, part.stats.get("columns", [0, 1, 2]))
+                sha = file_sha256(src)
             else:
                 table = read_table(src, skip_bad_lines=skip)
                 for n in table.notes:
@@ -251,7 +234,7 @@ def _attitude_report(cal_path: Path, part: SensorCalibration, sensor: str,
     SHA-256, or given with ``--data``)."""
     src = Path(args.data_file) if args.data_file else _find_source(cal_path, part)
     if src is None:
-        print(_stored_text(sensor, part))
+        print(stored_text(sensor, part, "pass --data LOG for the held-out check and figure"))
         if args.plot:
             print(f"  (no figure for {sensor}: its flight log {printable(part.source)!r} was "
                   "not found; pass --data LOG)", file=sys.stderr)

@@ -3,7 +3,8 @@
 
 A session (a table whose columns are named ``ax ay az gx gy gz mx my mz ...``, as ``triaxcal
 capture`` writes them) is reduced to still poses by :class:`~triaxcal.detect.PoseDetector` with
-every sensor the session has: the accelerometer's window-mean change (the seed's 0.07 g), the
+every sensor the session has: the accelerometer's window-mean change (the original method's 0.07
+g), the
 gyroscope's rate and the magnetometer's change (thresholds learnt from their noise unless
 given). :class:`PoseSettings` holds what a user can choose on the command line;
 :meth:`PoseSettings.resolve` turns it into the detector's options for a given session, filling
@@ -21,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
 from ..errors import CalibrationError
 from ._segmenter import PoseDetection
 from .poses import PoseDetector, detect_poses
@@ -105,7 +107,7 @@ class PoseSettings:
         Samples per averaging window.
     accel_threshold_g : float
         Largest change of the accelerometer's window mean between two windows, in g (the
-        seed's 0.07).
+        original method's 0.07).
     counts_per_g : float, optional
         Accelerometer units per g. ``None``: the median length of the accelerometer readings
         in the first :data:`HEAD_ROWS` rows (the board lies still at the start, so that is 1 g
@@ -117,10 +119,12 @@ class PoseSettings:
         In the sensor's raw units (counts). ``None``: learnt from the sensor's noise.
     hold_windows : int, optional
         A run is registered (or rejected) once it has this many windows -- the capture's bell,
-        the seed's beep -- and then goes on averaging until the board moves. ``None``: decided
+        the sphere-centre note's beep -- and then goes on averaging until the board moves.
+        ``None``: decided
         when the board moves. The same in capture and fit, so both make the same decisions.
     holdoff_s : float
-        Seconds ignored after each registered pose (the seed's 2 s after its beep); 0: none.
+        Seconds ignored after each registered pose (the original method's 2 s after its beep); 0:
+        none.
     rate_hz : float, optional
         Samples per second, to turn ``holdoff_s`` into samples. ``None``: from the session's
         ``t`` column (host arrival times) over the first :data:`HEAD_ROWS` rows.
@@ -207,7 +211,7 @@ class PoseSettings:
         if "accel" not in cols:
             raise CalibrationError(
                 "pose detection needs the accelerometer: name its columns ax, ay, az (as "
-                "triaxcal capture does) or pick them with --columns"
+                f"triaxcal capture does) or pick them ({opt('columns')})"
             )
         if not self.use_gyro:
             cols.pop("gyro", None)
@@ -222,7 +226,7 @@ class PoseSettings:
             if not (math.isfinite(cpg) and cpg > 0):
                 raise CalibrationError(
                     "cannot tell the accelerometer's units from the first rows (they read "
-                    "zero): pass --counts-per-g"
+                    f"zero): give them ({opt('counts_per_g')})"
                 )
         rate = self.rate_hz
         holdoff = 0
@@ -236,8 +240,8 @@ class PoseSettings:
                     times = np.zeros(0)
                 if len(times) < 2 or not times[-1] > times[0]:
                     raise CalibrationError(
-                        "--holdoff needs the sample rate: pass --rate-hz (the session has no "
-                        "usable t column)"
+                        f"{opt('holdoff_s')} needs the sample rate: give it ({opt('rate_hz')}; "
+                        "the session has no usable t column)"
                     )
                 rate = (len(times) - 1) / float(times[-1] - times[0])
             holdoff = int(round(self.holdoff_s * rate))

@@ -1,5 +1,5 @@
 """JavaScript module: the coefficients and an ``apply`` function, for a browser, node or an
-Espruino board (the sphere-fit seed coded its coefficients into an Espruino program).
+Espruino board (the spreadsheet sphere fit coded its coefficients into an Espruino program).
 
 Two forms of the same code:
 

@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
 from .._core import __version__
 from ..calibration.file import Calibration
 from ..errors import CalibrationError
@@ -109,7 +110,8 @@ def kalibr_intrinsics(cal: Calibration, *, counts_per_unit: Mapping[str, Any] | 
         if getattr(cal, s) is None:
             raise CalibrationError(
                 f"Kalibr's scale-misalignment model needs accelerometer and gyroscope parts; "
-                f"this calibration has no {s}: add it, or write model='calibrated'"
+                f"this calibration has no {s}: add it, or write "
+                f"{opt('model', 'calibrated', flag='--kalibr-model')}"
             )
     scales = Scales(counts_per_unit, sensor_model)
     pa = physical(cal.part("accel"), "accel", "m/s^2", "m/s^2", scales, fmt=FMT)
@@ -119,7 +121,8 @@ def kalibr_intrinsics(cal: Calibration, *, counts_per_unit: Mapping[str, Any] | 
             require_no_gain_poly(p, FMT)
             raise CalibrationError(
                 f"Kalibr's IMU model has no temperature terms; this calibration's {p.sensor} "
-                "has them: apply the calibration upstream and write model='calibrated'"
+                "has them: apply the calibration upstream and write "
+                f"{opt('model', 'calibrated', flag='--kalibr-model')}"
             )
     m_a, q = _lq(np.linalg.inv(pa.matrix), "accelerometer")
     m_g, c = _lq(np.linalg.inv(pg.matrix) @ q.T, "gyroscope")

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
 from ..calibration.file import Calibration
 from ..calibration.part import SensorCalibration
 from ..conventions.rotations import rotation_angle_deg
@@ -118,8 +119,8 @@ def motioncal_packet(
     if lost and not offsets_only:
         raise CalibrationError(
             "the MotionCal packet cannot carry all of this calibration: " + "; ".join(lost)
-            + ". Export --format c (or c-fixed) to keep every term, or accept the loss with "
-            "--offsets-only (offsets_only=True)")
+            + f". Export {opt('fmt', 'c', flag='--format')} (or c-fixed) to keep every term, "
+            f"or accept the loss with {opt('offsets_only', True)}")
     kw: dict[str, Any] = {}
     if cal.accel is not None:
         k, u = _driver_scale(cal.accel, "accel", scales)

@@ -1,13 +1,16 @@
 """Sphere and ellipsoid fits: the Python face of the Rust core, model choice and outlier
 rejection.
 
-* :mod:`~triaxcal.fit.ellipsoid` -- the fits themselves (sphere, axis, full), the seed's
+* :mod:`~triaxcal.fit.ellipsoid` -- the fits themselves (sphere, axis, full), the original method's
   sphere-centre descent and the batch fit, each a thin, validating call into ``triaxcal._core``;
   model choice by information criterion (``model="auto"``).
 * :mod:`~triaxcal.fit.select` -- outlier rejection around a fit (Magneto's rule and the
   default robust rule).
+* :mod:`~triaxcal.fit.center` -- the zero offset as the centre of a sphere of known radius
+  (the sphere-centre method's descent, its grid search, or a fixed-radius fit).
 """
 
+from .center import CENTER_METHODS, SphereCenter, sphere_center
 from .ellipsoid import (
     FIXABLE,
     MAX_ITER,
@@ -32,7 +35,7 @@ from .ellipsoid import (
 from .select import RobustFit, fit_robust
 
 #: The public names (``triaxcal.__all__`` gathers them); ``FIXABLE``, ``MAX_ITER``,
-#: ``METHODS`` and ``PARAM_NAMES`` stay importable from here.
+#: ``METHODS``, ``PARAM_NAMES`` and ``CENTER_METHODS`` stay importable from here.
 __all__ = [
     "MODELS",
     "AutoFit",
@@ -41,6 +44,7 @@ __all__ = [
     "EllipsoidFit",
     "LinearSphere",
     "RobustFit",
+    "SphereCenter",
     "descend_center",
     "fit_auto",
     "fit_batch",
@@ -50,5 +54,6 @@ __all__ = [
     "fit_sphere_linear",
     "grid_center",
     "information_criterion",
+    "sphere_center",
     "sphere_error",
 ]

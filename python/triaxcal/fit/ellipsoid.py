@@ -210,13 +210,14 @@ def fit_ellipsoid(
         the noise variance, which is estimated from the residuals). Removes the O(sigma^2)
         shrinkage of ``matrix`` that every length-based fit has; applied only where that bias
         exceeds a tenth of the statistical error (noise above 0.1/sqrt(N) of the radius).
-        ``False`` gives the plain geometric least-squares fit (the objective of the seed's
+        ``False`` gives the plain geometric least-squares fit (the objective of the original
+        method's
         spreadsheet: the sum of ``(|calibrated| - radius)^2``).
     fixed : dict, optional
         Parameters held at given values instead of fitted: ``offset_x/y/z`` (raw units) and,
         with ``radius`` given, gains in calibrated units per raw unit: ``gain_x/y/z`` (alias
         ``diag_x/y/z``) and ``offdiag_xy/xz/yz`` for "axis"/"full", ``gain`` for "sphere"
-        (``matrix = gain * I``). ``{"gain_z": 1.0}`` with ``radius=16384`` is the seed's
+        (``matrix = gain * I``). ``{"gain_z": 1.0}`` with ``radius=16384`` is the original method's
         spreadsheet fit (offsets and the x and y gains varied, the z gain 1).
 
     Returns
@@ -240,7 +241,7 @@ def fit_ellipsoid(
     >>> np.round(fit.offset, 6).tolist(), np.round(np.diag(fit.matrix), 6).tolist()
     ([0.05, -0.03, 0.02], [1.02, 0.98, 1.01])
 
-    Six readings, one per face of a cube, with the z gain held at 1 as the seed does:
+    Six readings, one per face of a cube, with the z gain held at 1 as the spreadsheet method does:
 
     >>> faces = np.array([[16900, 40, -20], [-15800, 40, -20], [560, 16700, -20],
     ...                   [560, -16100, -20], [560, 40, 16400], [560, 40, -16440]])
@@ -451,7 +452,7 @@ class Descent:
 
 
 def sphere_error(points: Any, center: Any, radius: float) -> float:
-    """The seed's error sum ``sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|``.
+    """The sphere-centre note's error sum ``sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|``.
 
     Examples
     --------
@@ -477,7 +478,8 @@ def descend_center(
 
     From ``start``, look at the 26 neighbours one ``step`` away; move to the best if it lowers
     :func:`sphere_error`, otherwise divide ``step`` by ``shrink``; stop once ``step`` falls
-    below ``min_step``. ``min_step=step`` gives the fixed-step descent. Defaults are the seed's
+    below ``min_step``. ``min_step=step`` gives the fixed-step descent. Defaults are the
+    sphere-centre note's
     (raw counts: step 1000 down to 0.01). The work is bounded before the search starts: a
     search whose steps alone would need more than ``5e8`` point evaluations (neighbourhoods
     times points; e.g. ``shrink=1.0001`` down to ``min_step=1e-300``) is refused with a

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import json
 import math
 import os
 import re
@@ -60,11 +59,14 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from .._checks.fields import parse_json
 from ..calibration.file import Calibration
 from ..calibration.part import SensorCalibration
 from ..calibration.request import FitRequest, SourceOptions
 from ..conventions.names import COEFFICIENTS
 from ..errors import CalibrationError
+from ..io.files import check_regular, open_regular, read_bounded
+from ..io.tables import _is_number, _plain, iter_csv
 from ..quality.coverage import coverage
 
 __all__ = [
@@ -385,6 +387,11 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
             raise CalibrationError(
                 "reading Parquet needs pyarrow: pip install 'triaxcal[dask]'"
             ) from None
+        check_regular(p, what="Parquet table")
+        with open_regular(p, what="Parquet table") as fh:
+            magic = fh.read(4)
+        if magic != b"PAR1":
+            raise CalibrationError(f"{p} is not a Parquet file (it does not start with PAR1)")
         try:
             t = pq.read_table(p)
         except Exception as exc:  # noqa: BLE001 - pyarrow raises many kinds
@@ -401,29 +408,34 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
             raise CalibrationError(f"{p}: the columns other than {by!r} must be numbers "
                                    f"({exc})") from None
     else:
-        with open(p, encoding="utf-8", errors="replace", newline="") as f:
-            reader = csv.reader(f)
-            try:
-                header = [h.strip() for h in next(reader)]
-            except StopIteration:
-                raise CalibrationError(f"{p} is empty") from None
-            if by not in header:
+        records = iter_csv(p, what="table of boards")
+        try:
+            _, head = next(records)
+        except StopIteration:
+            raise CalibrationError(f"{p} is empty") from None
+        header = [h.strip() for h in head]
+        if by not in header:
+            raise CalibrationError(
+                f"{p} has no column {by!r}; its header is {', '.join(header)}")
+        k = header.index(by)
+        others = [h for i, h in enumerate(header) if i != k]
+        ids, rows = [], []
+        for lineno, row in records:
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue
+            if len(row) != len(header):
                 raise CalibrationError(
-                    f"{p} has no column {by!r}; its header is {', '.join(header)}")
-            k = header.index(by)
-            others = [h for i, h in enumerate(header) if i != k]
-            ids, rows = [], []
-            for lineno, row in enumerate(reader, start=2):
-                if not row or (len(row) == 1 and not row[0].strip()):
-                    continue
-                if len(row) != len(header):
-                    raise CalibrationError(
-                        f"{p}, line {lineno}: {len(row)} values, expected {len(header)}")
-                ids.append(row[k].strip())
-                try:
-                    rows.append([float(v) for i, v in enumerate(row) if i != k])
-                except ValueError:
-                    raise CalibrationError(f"{p}, line {lineno}: not all numbers") from None
+                    f"{p}, line {lineno}: {len(row)} values, expected {len(header)}")
+            ids.append(row[k])  # as written: ids that differ only by spaces are other boards
+            values = [v.strip() for i, v in enumerate(row) if i != k]
+            # numbers as the table reader reads them: plain ASCII decimals, finite
+            if not all(_plain(v) and _is_number(v) for v in values):
+                raise CalibrationError(f"{p}, line {lineno}: not all numbers")
+            row_values = [float(v) for v in values]
+            if not all(math.isfinite(v) for v in row_values):
+                raise CalibrationError(f"{p}, line {lineno}: a value is not finite (nan or "
+                                       "inf): drop or fix that row")
+            rows.append(row_values)
         data = np.array(rows, dtype=np.float64).reshape(-1, len(others))
     if not ids:
         raise CalibrationError(f"{p} has no data rows")
@@ -648,12 +660,13 @@ def write_summary(results: Sequence[BoardResult], path: Any) -> Path:
 def load_limits(path: Any) -> Limits:
     """Read limits from a JSON file ``{"offset_max": 0.05, ...}``."""
     p = Path(path)
+    data = read_bounded(p, limit=1 << 20, what="limits file")  # a regular file, <= 1 MiB
     try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise CalibrationError(f"limits file {p} not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        d = parse_json(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
         raise CalibrationError(f"limits file {p} is not JSON: {exc}") from None
+    except CalibrationError as exc:
+        raise CalibrationError(f"limits file {p}: {exc}") from None
     return Limits.from_mapping(d)
 
 

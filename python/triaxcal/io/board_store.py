@@ -38,7 +38,7 @@ number of bytes between ``seq`` and the CRC like every frame of the still-pose m
 ``Q`` (0x51) the board's fit
     ``version`` u8 (1), ``code`` i8 (the C library's refusal, :data:`FIT_CODES`; 0 fitted and
     stored), ``descent_code`` i8, ``warnings`` u16, ``n`` u16 poses, ``iterations`` u8,
-    ``descent_iterations`` u16, the seed's centre 3 x f32, ``rms`` f32, ``spread`` f32,
+    ``descent_iterations`` u16, the descent's centre 3 x f32, ``rms`` f32, ``spread`` f32,
     ``faces`` 6 x u8, ``stack_free`` u16 (bytes of RAM the stack never reached).
 
 Commands: ``K`` report, ``c`` fit now, ``A`` / ``a`` calibrated / raw streams, and the write
@@ -338,7 +338,7 @@ class BoardQuality:
     """A ``Q`` frame: what the board's fit gave.
 
     ``code`` is the C library's (:data:`FIT_CODES`; 0: fitted and stored), ``center`` the
-    seed's centre search (raw counts), ``rms`` in calibrated counts, ``faces`` the poses
+    sphere-centre search (raw counts), ``rms`` in calibrated counts, ``faces`` the poses
     nearest +X -X +Y -Y +Z -Z, ``stack_free`` the bytes of RAM its stack never reached.
     """
 

@@ -11,7 +11,7 @@ ETNA 25, 2006): a round cap at each pole and collars in between, each collar cut
 longitude sectors. By Archimedes' hat-box theorem a collar ``z_lo < z < z_hi`` has area
 ``2 pi (z_hi - z_lo)``, so every cell is a rectangle of the same area in the cylindrical
 equal-area projection (longitude, z) that the report figure draws. The default 24 cells are
-about 41 degrees across: the seed's globe scheme (7 latitudes x 12 twists) hits all of them,
+about 41 degrees across: the globe scheme (7 latitudes x 12 twists) hits all of them,
 six faces of a cube hit 6 (25 %), a level turn (yaw only) hits the 10 cells of the equator's
 collar (42 %).
 

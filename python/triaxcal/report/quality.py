@@ -4,7 +4,8 @@ For readings ``raw`` and a calibration (``calibrated = (raw - offset) @ matrix.T
 **multiplies**, ``|calibrated|`` should be ``radius``) the report gives
 
 * the residual ``|calibrated| - radius``: RMS in calibrated units and in % of the radius;
-* min / max / mean / std of the calibrated norms (the seeds' "descriptive statistics");
+* min / max / mean / std of the calibrated norms (the "descriptive statistics" of the spreadsheet
+method);
 * the standard error of every fitted coefficient (``offset_x``... ``offdiag_yz``);
 * coverage of the sphere: the share of the equal-area cells of :mod:`triaxcal.quality.coverage` (the
   measure ``capture``, ``demo`` and ``fit`` report too) that hold at least one calibrated

@@ -1,5 +1,8 @@
 """The coefficients of a part as a table, and what ``triaxcal fit`` says after a fit: the lines
-the command line prints and the live page shows (one text, two places)."""
+the command line prints and the live page shows (one text, two places). Parts that are not a
+fit of readings to a sphere (gyro gains, temperature terms, a bias) are reported by the numbers
+stored with them (:func:`summary_text`), and so is any part whose readings are not at hand
+(:func:`stored_text`)."""
 
 from __future__ import annotations
 
@@ -11,7 +14,12 @@ import numpy as np
 from ..calibration.part import SensorCalibration
 from ..conventions.units import per_unit
 
-__all__ = ["coefficient_table", "fit_lines", "printable", "stderr_lines"]
+__all__ = ["SUMMARY_METHODS", "SUMMARY_MODELS", "coefficient_table", "fit_lines", "printable",
+           "stderr_lines", "stored_text", "summary_only", "summary_text"]
+
+#: Parts whose readings do not lie on a sphere: reported by their stored numbers.
+SUMMARY_METHODS = ("gyro-gains", "temperature")
+SUMMARY_MODELS = ("bias",)
 
 
 def printable(text: Any, limit: int = 2000) -> str:
@@ -135,3 +143,83 @@ def fit_lines(saved: Any) -> list[str]:
         for w in out.source.recording.meta.get("warnings", []):
             lines.append(f"  warning: {printable(w)}")
     return lines
+
+
+def summary_only(part: SensorCalibration) -> bool:
+    """Whether ``part`` is reported by its stored numbers rather than on its readings (gyro
+    gains, temperature terms, a bias: their readings do not lie on a sphere)."""
+    return part.stats.get("method") in SUMMARY_METHODS or part.model in SUMMARY_MODELS
+
+
+def _opt_num(v: Any, fmt: str = ".4g") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+
+
+def summary_text(sensor: str, part: SensorCalibration) -> str:
+    """The report of a gyro-gains, temperature or bias part: the numbers stored with it.
+
+    >>> import numpy as np, triaxcal as tc
+    >>> part = tc.SensorCalibration(offset=[12, -7, 3], matrix=np.eye(3) / 131, raw_unit="counts",
+    ...                             unit="deg/s", model="bias", stats={"n_samples": 500})
+    >>> print(summary_text("gyro", part))  # doctest: +NORMALIZE_WHITESPACE
+    gyro calibration (counts -> deg/s, bias): the numbers stored when it was made
+      offset          x 12  y -7  z 3 counts
+      scale           x 0.00763359  y 0.00763359  z 0.00763359 deg/s per counts (multiplies)
+      samples         500
+    """
+    s = part.stats
+    method = s.get("method") or part.model
+    lines = [f"{sensor} calibration ({part.raw_unit} -> {part.unit}, {method}): the numbers "
+             "stored when it was made"]
+    lines.append("  offset          " + "  ".join(f"{a} {v:.6g}" for a, v in
+                                               zip("xyz", part.offset)) + f" {part.raw_unit}")
+    d = np.diag(part.matrix)
+    lines.append("  scale           " + "  ".join(f"{a} {v:.6g}" for a, v in zip("xyz", d))
+                 + f" {part.unit} per {part.raw_unit} (multiplies)")
+    if "gain_counts_per_dps" in s:
+        none3: list[Any] = [None] * 3
+        cw = s.get("gain_cw_counts_per_dps", none3)
+        ccw = s.get("gain_ccw_counts_per_dps", none3)
+        for i, a in enumerate("xyz"):
+            lines.append(f"  gain {a}          {_opt_num(s['gain_counts_per_dps'][i])} counts per "
+                         f"deg/s (clockwise {_opt_num(cw[i])}, counter-clockwise "
+                         f"{_opt_num(ccw[i])})")
+    if part.temperature is not None:
+        t = part.temperature
+        lines.append(f"  temperature     degree {len(t.offset_poly) - 1} about {t.temp_ref_c:.2f} "
+                     f"deg C, fitted over {t.temp_range_c[0]:.2f} .. {t.temp_range_c[1]:.2f}")
+        lines.append("  drift           " + "  ".join(
+            f"{a} {v:.4g}" for a, v in zip("xyz", t.offset_poly[1])) + f" {part.raw_unit} per "
+            "deg C")
+    if "n_samples" in s:
+        lines.append(f"  samples         {s['n_samples']}")
+    if s.get("warnings"):
+        lines.append("  warnings")
+        lines += [f"    - {printable(w)}" for w in s["warnings"]]
+    return "\n".join(lines)
+
+
+def stored_text(sensor: str, part: SensorCalibration,
+                why: str = "pass the data file for the full report and figure") -> str:
+    """The statistics stored with a fitted part when its readings are not at hand (``why``
+    says so in the first line)."""
+    from .quality import context_lines
+
+    s = part.stats
+    lines = [(f"{sensor} calibration ({part.raw_unit} -> {part.unit}, model {part.model}): "
+             f"statistics stored at fit time ({why})")]
+    if "rms" in s:
+        lines.append(f"  residual RMS    {s['rms']:.4g} {part.unit} "
+                     f"({s.get('rms_pct_of_radius', float('nan')):.3g} % of radius)")
+    if "norms" in s:
+        n = s["norms"]
+        lines.append(f"  calibrated |v|  min {n['min']:.6g}  max {n['max']:.6g}  mean "
+                     f"{n['mean']:.6g}  std {n['std']:.4g} {part.unit}")
+    if s.get("coverage_pct") is not None:
+        lines.append(f"  coverage        {s['coverage_pct']:.0f} % of the sphere")
+    if s.get("rejected") is not None:
+        lines.append(f"  outliers        {len(s['rejected'])} rejected")
+    lines += context_lines(part)
+    for w in s.get("warnings", []):
+        lines.append(f"    - {printable(w)}")
+    return "\n".join(lines)

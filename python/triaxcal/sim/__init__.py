@@ -39,7 +39,7 @@ from ..io.protocol import CHANNELS_7, CHANNELS_10
 from .device import MODE_BYTES, Faults, SentFrame, SimDevice
 from .imu import Recording, SimIMU
 from .noise import NoiseTruth, noise_chunks, simulate_noise
-from .scripts import Script, globe_script, rotation_script, six_face_script
+from .scripts import Script, globe_script, rotation_script, six_face_script, tumble_script
 from .truth import (
     ACCEL_COUNTS_PER_G,
     GYRO_COUNTS_PER_DPS,
@@ -84,4 +84,5 @@ __all__ = [
     "six_face_script",
     "temp_c_from_raw",
     "temp_raw_from_c",
+    "tumble_script",
 ]

@@ -93,7 +93,7 @@ class SimDevice:
     the current sample (in any mode); ``P`` stops streaming (the boot default), ``B``
     streams legacy binary frames, ``F`` framed (COBS + CRC-16) frames, ``T`` text lines, ``R``
     MotionCal ``Raw:`` lines; ``I`` answers the board's serial number as one line
-    ``ID:<serial>\r\n``; a 68-byte MotionCal calibration packet with a valid CRC is
+    ``ID:<serial>\\r\\n``; a 68-byte MotionCal calibration packet with a valid CRC is
     answered with ``Cal1:``/``Cal2:`` lines (stored in :attr:`motioncal`).
 
     Parameters

@@ -1,10 +1,10 @@
-/* On-board still-pose detection (mode 'S'), the seed's window method with the gyroscope added.
+/* On-board still-pose detection (mode 'S'), the sphere-centre method's window method with the gyroscope added.
  * Hardware-free and integer-only: fed one sample at a time (ax ay az gx gy gz temp counts), it
  * says when a window of samples completed and when a pose was registered.
  *
  * Windows of `window` samples are summed. A window "moved" when
  *   - any accelerometer axis of its mean changed by more than `accel_threshold` counts from
- *     the previous window's mean (the seed's rule: 0.07 g = 1147 counts at +-2 g), or
+ *     the previous window's mean (the sphere-centre method's rule: 0.07 g = 1147 counts at +-2 g), or
  *   - any gyroscope axis of its mean is more than `gyro_threshold` counts away from the bias
  *     (the gyro's mean over the last steady window): a turn, which the accelerometer cannot see
  *     when it is about the vertical (the 12 twists at each pole of the globe scheme).
@@ -17,7 +17,7 @@
  * After a move, the first steady window is not averaged (it may hold the end of the move);
  * the next `hold_windows` steady windows are, and then the pose is registered: its sums and
  * sample count are sent, the buzzer beeps, and for `holdoff_ms` no pose is averaged (the
- * seed's 2 s to let go of the board). Motion is still watched during the hold-off. A pose is
+ * original method's 2 s to let go of the board). Motion is still watched during the hold-off. A pose is
  * registered once: the next one needs a move since -- the accelerometer's or the gyro's
  * window mean changed by more than its threshold, or the gyro is more than STILL_REANCHOR_MAX
  * thresholds off its bias (a gyro a little off but unchanging is a drift, not a move).
@@ -38,7 +38,7 @@ extern "C" {
 #define STILL_REANCHOR_MAX 16
 #define STILL_STATUS_MS 100 /* a status frame at most this often (and after each pose) */
 
-/* Defaults: the seed's 0.07 g and 2 s at 100 samples per second. */
+/* Defaults: the sphere-centre method's 0.07 g and 2 s at 100 samples per second. */
 #define STILL_DEFAULT_PERIOD_MS 10
 #define STILL_DEFAULT_WINDOW 25
 #define STILL_DEFAULT_HOLD_WINDOWS 4

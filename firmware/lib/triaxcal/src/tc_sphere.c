@@ -1,4 +1,4 @@
-/* The seed's centre search (../shared/seeds/sphere-center-descent.txt), as rust/sphere/
+/* The sphere-centre descent (the error sum and its 26-neighbour search), as rust/sphere/
  * descend_center does it: the error sum E(c) = sum |(p - c)^2 - R^2|, and the 26-neighbour
  * descent whose step shrinks when no neighbour is better. */
 #include "tc_internal.h"

@@ -4,9 +4,9 @@
  * every buffer is sized at compile time (tc_config.h). The pieces, in the order a board uses
  * them (firmware/README.md, "The C library"):
  *
- *   still.h        the still-pose detector (the seed's window rule with the gyro), integers only
+ *   still.h        the still-pose detector (the sphere-centre method's window rule with the gyro), integers only
  *   tc_poses_*     a buffer of pose means that, once full, keeps the poses that cover the sphere
- *   tc_descend_*   the seed's centre search: sum of |error|, 26 neighbours, variable step
+ *   tc_descend_*   the sphere-centre method's centre search: sum of |error|, 26 neighbours, variable step
  *   tc_fit         offset + 3 gains ("axis") or offset + symmetric matrix ("full"), Gauss-Newton
  *                  on the geometric residual from the linear sphere fit, with the quality
  *                  figures and refusals of the host (rust/bounds.rs, rust/ellipsoid/finish.rs)
@@ -106,7 +106,7 @@ enum tc_code {
  * to each other if it is farther from every stored pose than those two are from each other,
  * and is dropped otherwise: the smallest distance between stored poses never shrinks, so the
  * buffer keeps the poses that cover the sphere best (distances between raw readings stand for
- * angles: all lie on one ellipsoid). The seed's globe (84 poses) repeats each pole 12 times
+ * angles: all lie on one ellipsoid). The sphere-centre method's globe (84 poses) repeats each pole 12 times
  * (the twists about the vertical look alike to an accelerometer): a buffer of 62 holds every
  * direction it has. */
 struct tc_poses {
@@ -131,7 +131,7 @@ void tc_pose_accel(const struct still_pose *pose, tc_real out[3]);
 /* Smallest squared distance between two stored poses (0 with fewer than two). */
 tc_real tc_poses_min_gap2(const struct tc_poses *b);
 
-/* ------------------------------------------------------------------ the seed's search */
+/* ------------------------------------------------------------------ the sphere-centre method's search */
 
 struct tc_descent_options {
     tc_real start[3]; /* where the search starts */
@@ -150,7 +150,7 @@ struct tc_descent {
     uint8_t converged;    /* 0 when max_iter stopped it before the step fell below min_step */
 };
 
-/* The seed's values (sphere::DescentOptions::default): start 0, step 1000, min_step 0.01,
+/* The sphere-centre method's values (sphere::DescentOptions::default): start 0, step 1000, min_step 0.01,
  * shrink 10, max_iter 1000000. */
 void tc_descent_defaults(struct tc_descent_options *o);
 /* sum_i |(x_i - c_x)^2 + (y_i - c_y)^2 + (z_i - c_z)^2 - radius^2| (sphere::sphere_error). */

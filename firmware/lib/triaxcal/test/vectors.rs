@@ -90,7 +90,7 @@ fn scaled_opts(step: f64, min_step: f64) -> DescentOptions {
 fn cases() -> Vec<Case> {
     let mut out = Vec::new();
     let mut rng = Rng(0x5eed_1234_abcd_ef01);
-    // The seed's globe: 7 latitudes x 12 turns, pose means of an MPU-6050 at +-2 g (noise of
+    // The sphere-centre method's globe: 7 latitudes x 12 turns, pose means of an MPU-6050 at +-2 g (noise of
     // a mean of 100 samples), small cross-axis terms.
     let minv = [
         [16630.0, 40.0, -25.0],
@@ -171,7 +171,7 @@ fn cases() -> Vec<Case> {
         radius: 1.0,
         descent: scaled_opts(0.1, 1e-6),
     });
-    // the fixed-step descent of the seed's first listing (step 1 count)
+    // the fixed-step descent of the sphere-centre method's first listing (step 1 count)
     let pts = (0..30)
         .map(|_| {
             let u = rng.unit();

@@ -1,13 +1,13 @@
-// calibrate_mpu6050: the board calibrates its MPU-6050 accelerometer itself, the seed's
+// calibrate_mpu6050: the board calibrates its MPU-6050 accelerometer itself, the sphere-centre method's
 // program (sensors_calibrate_program) with the triaxcal library.
 //
 // Hold the board still in a pose until it beeps (and prints the pose), turn it to the next,
-// and so on: the seed's globe is 7 latitudes x 12 turns about the vertical, 84 poses. After the
+// and so on: the sphere-centre method's globe is 7 latitudes x 12 turns about the vertical, 84 poses. After the
 // 84th (or when you send 'c') the board fits the offsets (the centre of the sphere) and the
 // three gains, prints them with their quality, stores them in the EEPROM (a record with
 // version and CRC) and then prints calibrated readings, in g, once a second. At start-up a
 // stored calibration is read back and used. Send 'r' for raw readings, 'a' for calibrated.
-// The seed's own centre search (tc_descend_center, 26 neighbours, variable step) is in the
+// The sphere-centre method's own centre search (tc_descend_center, 26 neighbours, variable step) is in the
 // library too; the project firmware runs both (firmware/src/board_cal.c); on an Uno beside
 // Wire and Serial the flash holds one of them.
 //
@@ -92,7 +92,7 @@ static bool load()
     return false;
 }
 
-// The seed's program, the end of it: the centre and the gains, the record.
+// The sphere-centre program, the end of it: the centre and the gains, the record.
 static void calibrate()
 {
     const tc_real(*p)[3] = (const tc_real(*)[3])poses.p;
@@ -142,7 +142,7 @@ void setup()
     mpu_write(0x1C, 0x00);  // +-2 g: 16384 counts per g
     pinMode(BUZZER_PIN, OUTPUT);
     struct still_settings s;
-    still_defaults(&s);  // the seed's 0.07 g, 2 s of hold-off, 100 samples per second
+    still_defaults(&s);  // the sphere-centre method's 0.07 g, 2 s of hold-off, 100 samples per second
     still_start(&s);
     tc_poses_init(&poses, store, 48);
     have_cal = load();
