@@ -110,8 +110,9 @@ def test_align_finds_the_mounting_and_is_stored(tmp_path, wmm, capsys):
     assert "alignment       into the accel frame" in rep and "heading check" in rep
     # the parameter files carry it
     parm = tmp_path / "cal.parm"
-    assert main(["export", str(cal), "--format", "px4", "--sensors", "mag", "-o",
-                 str(tmp_path / "p.params")]) == 0
+    assert main(["export", str(cal), "--format", "px4", "--sensors", "mag",
+                 "--counts-per-unit", "mag=10:uT",  # the simulator's scale
+                 "-o", str(tmp_path / "p.params")]) == 0
     assert "CAL_MAG0_ROT\t6\t6" in (tmp_path / "p.params").read_text()
     del parm
 

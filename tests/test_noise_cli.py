@@ -109,14 +109,14 @@ def test_cli_writes_the_json_that_export_takes(still_session, tmp_path, capsys):
     assert float(line.split(":")[1].split("#")[0]) == noise["gyroscope_noise_density"]
 
 
-def test_readme_noise_example_runs(capsys):
+def test_docs_noise_example_runs(capsys):
     import re
 
-    from conftest import readme_section
+    from conftest import doc_page
 
-    code = re.findall(r"```python\n(.*?)```", readme_section("Noise figures"), re.S)[0]
+    code = re.findall(r"```python\n(.*?)```", doc_page("guide/noise.md"), re.S)[0]
     ns: dict = {}
-    exec(compile(code, "README noise example", "exec"), ns)
+    exec(compile(code, "docs noise example", "exec"), ns)
     out = capsys.readouterr().out
     assert "angle random walk" in out and "gyroscope_noise_density" in out
     assert ns["acc"].n == 1_000_000

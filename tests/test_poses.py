@@ -145,6 +145,7 @@ def test_docstrings_run():
     assert doctest.testmod(poses_mod, raise_on_error=True).failed == 0
 
 
+@pytest.mark.slow
 def test_capture_with_poses_84_stops_by_itself_and_fit_agrees(tmp_path, capsys):
     # `triaxcal capture --poses 84` on the globe scheme ends by itself (it stopped at 63 when
     # only the accelerometer ended a pose), and `fit --poses` on the file finds the same poses

@@ -92,7 +92,8 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
+    sub = p.add_subparsers(dest="action", metavar="ACTION", required=True,
+                           help="read: the stored calibration into a file; write: store one")
     r = sub.add_parser("read", help="the board's stored calibration into a calibration file")
     r.add_argument("-o", "--output", metavar="CAL.json",
                    help="write the calibration file here (otherwise only print it)")
