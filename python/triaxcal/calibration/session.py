@@ -46,6 +46,8 @@ class FitOutcome:
     #: Things to tell the user about the input (skipped lines, an implausible radius).
     notes: list[str] = field(default_factory=list)
     expected: ExpectedField | None = None
+    #: ``--method attitude``: the flight log's readings with attitude (a FlightSource).
+    flight: Any = None
 
 
 def fit_session(
@@ -89,7 +91,7 @@ def fit_session(
         return FitOutcome(part=part, points=fsrc.raw, sensor=sensor,
                           rejected=np.asarray(part.stats.get("rejected", []), dtype=np.int64),
                           reason=None, table=None, source=None, notes=notes,
-                          expected=part.expected_field)
+                          expected=part.expected_field, flight=fsrc)
     expected = expected_for(req)
     src = table_source(data, sensor, req.source) if isinstance(data, Table) else load_source(
         data, sensor, req.source)

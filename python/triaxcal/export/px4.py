@@ -290,6 +290,9 @@ def px4_params_file(
         f"{_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
         "# accel = (raw - thermal - CAL_ACCn_OFF) * CAL_ACCn_SCALE; gyro = raw - thermal - "
         "CAL_GYROn_OFF; mag = R S (raw - CAL_MAGn_OFF), R = CAL_MAGn_ROT (external magnetometers)",
+        *(["# with CAL_MAG_COMP_TYP: mag = R S ((raw + power * CAL_MAGn_xCOMP) - OFF), power = "
+           "battery current in kA (2) or throttle 0..1 (1)"]
+          if any(name == PX4_COMP_TYPE for name, _, _ in params) else []),
         *comment_lines((*mark_lines(prep.invalid), *prep.notes, *omitted)),
         "#",
         "# Vehicle-Id Component-Id Name Value Type",
