@@ -2,7 +2,6 @@
 triaxcal.calibration.flight) on the simulated flight with truth and the real logs."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,8 +12,6 @@ from triaxcal.calibration.request import FieldOptions, FitRequest
 from triaxcal.sim.flight import write_flight
 
 pytest.importorskip("pymavlink")
-REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata"
-ERLE = REAL / "ardupilot-erle-logs"
 
 
 @pytest.fixture(scope="module")
@@ -43,16 +40,15 @@ def test_simulated_flight_recovers_offsets_and_interference(flight):
     assert abs(params["COMPASS_MOT_Z"] - truth["COMPASS_MOT"][2]) < 0.25
 
 
-@pytest.mark.skipif(not ERLE.is_dir(), reason="real logs not present")
 @pytest.mark.parametrize("name", ["PXFv2.0b+Rpi.BIN", "Erle-Brain3.BIN"])
-def test_real_ardupilot_logs_are_refused_with_the_reason(name):
+def test_real_ardupilot_logs_are_refused_with_the_reason(realdata, name):
+    ERLE = realdata / "ardupilot-erle-logs"
     part, _ = fit_flight(ERLE / name, FitRequest(sensor="mag", method="attitude"))
     v = check_part(part, "mag")
     assert not v.valid
     assert any("does not determine" in r or "does not hold still" in r for r in v.reasons)
 
 
-@pytest.mark.skipif(not ERLE.is_dir(), reason="real logs not present")
 def test_log_without_attitude_is_refused(tmp_path):
     table = tmp_path / "mag.csv"
     table.write_text("mx,my,mz\n" + "\n".join(f"{i},{-i},{i * 2}" for i in range(50)))
@@ -150,11 +146,11 @@ def test_unknown_field_holds_the_mean_gain(flight):
     assert np.linalg.norm(-fit.offset - truth["COMPASS_OFS"]) <= 0.01 * field
 
 
-@pytest.mark.skipif(not ERLE.is_dir(), reason="real logs not present")
-def test_real_log_without_the_field_keeps_its_gains():
+def test_real_log_without_the_field_keeps_its_gains(realdata):
     """Erle-Brain3 (a level flight, no GPS): holding only the x gain let y and z collapse to
     0.49 and 0.15 (and a yaw-free fit to 0.01-0.05); the mean gain holds them within 0.5..2."""
-    part, _ = fit_flight(ERLE / "Erle-Brain3.BIN", FitRequest(sensor="mag", method="attitude"))
+    part, _ = fit_flight(realdata / "ardupilot-erle-logs" / "Erle-Brain3.BIN",
+                         FitRequest(sensor="mag", method="attitude"))
     ev = np.linalg.eigvalsh(part.matrix)
     assert 0.5 <= ev.min() and ev.max() <= 2.0
     assert np.trace(part.matrix) == pytest.approx(3.0)
@@ -190,22 +186,22 @@ def test_yaw_is_used_only_when_the_parameters_say_it_is_not_this_compass(fmt, pa
     assert used is fused and why
 
 
-@pytest.mark.skipif(not ERLE.is_dir(), reason="real logs not present")
-def test_a_fused_yaw_is_not_used_however_far_it_strays():
+def test_a_fused_yaw_is_not_used_however_far_it_strays(realdata):
     """Erle-Brain3's EKF fused the compass (COMPASS_USE = 1) and learned offsets in flight
     (EK2_MAG_CAL = 3): its yaw strays 14 deg RMS from the logged compass heading but still
     carries the compass's errors, so only roll and pitch are used."""
-    part, _ = fit_flight(ERLE / "Erle-Brain3.BIN", FitRequest(sensor="mag", method="attitude"))
+    part, _ = fit_flight(realdata / "ardupilot-erle-logs" / "Erle-Brain3.BIN",
+                         FitRequest(sensor="mag", method="attitude"))
     a = part.stats["attitude"]
     assert a["heading"] == "free" and "COMPASS_USE = 1" in a["heading_reason"]
     assert 10 < a["logged_heading_error_deg"] < 20
 
 
-@pytest.mark.skipif(not ERLE.is_dir(), reason="real logs not present")
-def test_refused_flight_says_what_to_fly(tmp_path):
+def test_refused_flight_says_what_to_fly(realdata, tmp_path):
     from triaxcal.calibration.gate import RECORD_INSTEAD, InvalidCalibrationError, require_valid
 
-    part, _ = fit_flight(ERLE / "Erle-Brain3.BIN", FitRequest(sensor="mag", method="attitude"))
+    part, _ = fit_flight(realdata / "ardupilot-erle-logs" / "Erle-Brain3.BIN",
+                         FitRequest(sensor="mag", method="attitude"))
     v = check_part(part, "mag")
     assert not v.valid and v.record_instead != RECORD_INSTEAD["mag"]
     for words in ("full, slow turns", "vary the throttle", "--location", "EK3_SRC1_YAW"):
