@@ -119,8 +119,8 @@ def fit_lines(saved: Any) -> list[str]:
         f"{part.unit}), model {part.model}, {s['n']} readings used, {len(out.rejected)} "
         f"rejected; residual RMS {s['rms']:.4g} {part.unit}"
         + ("" if rms_pct is None else f" ({rms_pct:.3g} % of radius)")
-        + f"; std/mean of |v| {'n/a' if som is None else f'{100 * som:.3g} %'}; coverage "
-        f"{s.get('coverage_pct', 0.0):.0f} %"
+        + f"; std/mean of |v| {'n/a' if som is None else f'{100 * som:.3g} %'}"
+        + ("" if s.get("coverage_pct") is None else f"; coverage {s['coverage_pct']:.0f} %")
         + ("" if part.valid is not False else "; NOT VALID (written with --force)"),
     ]
     lines += ["  " + r for r in coefficient_table(part, out.sensor)]
