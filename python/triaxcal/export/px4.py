@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks.spelling import opt
+from .._checks.spelling import in_command_line
 from .._core import __version__
 from ..calibration.file import Calibration
 from ..conventions.autopilot import (
@@ -217,8 +217,9 @@ def _px4(cal: Calibration, *, instance: int = 0, sensors: Iterable[str] | None =
         else:
             omitted.append(
                 f"{cp}ID not written: the {sensor}'s device id is not known (give it with "
-                f"{opt('device_ids', f'{sensor}=ID', flag='--device-id')}, the vehicle's "
-                f"{cp}ID), "
+                + (f"--device-id {sensor}=ID" if in_command_line() else
+                   f"device_ids={{{sensor!r}: ID}}")
+                + f", the vehicle's {cp}ID), "
                 f"so these values apply to whichever device the vehicle's {cp}ID names")
         offset = p.offset
         for i, a in enumerate("XYZ"):
