@@ -520,3 +520,73 @@ def test_sim_truth_through_ardupilot_equation():
     got = _ap_compass(p, rec.mag.astype(float))
     err = np.linalg.norm(got / 10 - rec.mag_ut, axis=1)
     assert np.median(err) < 0.5     # uT, against the simulator's true field (noise 3 counts)
+
+
+# --------------------------------------------------------------------------------------------
+# Interference (a compass calibrated from a flight: triaxcal.methods.attitude)
+
+
+def _flight_part(unit: str, per: str, vector, rng) -> tc.SensorCalibration:
+    """A flight calibration: ``(raw - offset) @ M.T + vector * x`` with ``x`` the battery
+    current (A) or the throttle (0..1), ``vector`` in ``unit`` per A / per unit of throttle."""
+    k = {"mG": 1.0, "gauss": 1e-3}[unit]
+    return tc.SensorCalibration(
+        offset=np.array([140.0, -95.0, 60.0]) * k, matrix=_sym(rng, 1.02), raw_unit=unit,
+        unit=unit, radius=480.0 * k, model="attitude",
+        stats={"interference": {"per": per, "vector": list(np.asarray(vector) * k),
+                                "unit": unit, "source": "BAT.Curr"}})
+
+
+def _ap_compass_mot(p: dict, raw: np.ndarray, x: np.ndarray, n: str = "") -> np.ndarray:
+    # ArduPilot libraries/AP_Compass/AP_Compass_Backend.cpp, correct_field, after the elliptical
+    # correction:  const Vector3f &mot = state.motor_compensation.get();
+    #   if (_compass._motor_comp_type == AP_COMPASS_MOT_COMP_THROTTLE)   motor_offset = mot * _thr;
+    #   else if (... == AP_COMPASS_MOT_COMP_CURRENT) motor_offset = mot * battery.current_amps();
+    #   mag += state.motor_offset;     (AP_Compass.h: MOT_COMP_THROTTLE 1, MOT_COMP_CURRENT 2)
+    mot = np.array([p[f"COMPASS_MOT{n}_{a}"] for a in "XYZ"], F32)
+    assert p["COMPASS_MOTCT"] in (1.0, 2.0)
+    return _ap_compass(p, raw, n) + x.astype(F32)[:, None] * mot
+
+
+@pytest.mark.parametrize("per, compass", [("A", 0), ("throttle", 0), ("A", 1)])
+def test_ardupilot_interference_round_trip(raw_mag, per, compass):
+    rng = np.random.default_rng(11)
+    part = _flight_part("mG", per, [3.5, -2.0, 5.0] if per == "A" else [120.0, -60.0, 200.0], rng)
+    p = _ap_load(ardupilot_parm(tc.Calibration(mag=part), compass=compass))
+    n = "" if compass == 0 else str(compass + 1)
+    assert p["COMPASS_MOTCT"] == (2.0 if per == "A" else 1.0)
+    x = rng.uniform(0, 40, len(raw_mag)) if per == "A" else rng.uniform(0, 1, len(raw_mag))
+    want = part.apply(raw_mag) + x[:, None] * np.asarray(part.stats["interference"]["vector"])
+    got = _ap_compass_mot(p, raw_mag, x, n)
+    assert np.max(np.abs(got - want)) < 2e-6 * np.abs(want).max() * 10
+
+
+def _px4_mag_comp(p: dict, raw: np.ndarray, x: np.ndarray, n: int) -> np.ndarray:
+    # PX4 src/lib/sensor_calibration/Magnetometer.hpp, Correct():
+    #   return _rotation * (_scale * ((data + _power * _power_compensation) - _offset));
+    # Magnetometer.cpp ParametersUpdate: _power_compensation = CAL_MAGn_{X,Y,Z}COMP.
+    # src/modules/sensors/vehicle_magnetometer/VehicleMagnetometer.cpp Run(), when armed:
+    #   CAL_MAG_COMP_TYP 1 (Throttle): UpdatePower(actuator_controls_0.control[INDEX_THROTTLE])
+    #   2 / 3 (Current_inst0 / 1): UpdatePower(bat_stat.current_a * 0.001f)   // [kA]
+    typ = p["CAL_MAG_COMP_TYP"]
+    power = (x * 0.001 if typ in (2.0, 3.0) else x).astype(F32)
+    d = [p[f"CAL_MAG{n}_{a}SCALE"] for a in "XYZ"]
+    o = [p[f"CAL_MAG{n}_{a}ODIAG"] for a in "XYZ"]
+    s = np.array([[d[0], o[0], o[1]], [o[0], d[1], o[2]], [o[1], o[2], d[2]]], F32)
+    comp = np.array([p[f"CAL_MAG{n}_{a}COMP"] for a in "XYZ"], F32)
+    off = np.array([p[f"CAL_MAG{n}_{a}OFF"] for a in "XYZ"], F32)
+    return ((raw.astype(F32) + power[:, None] * comp) - off) @ s.T
+
+
+@pytest.mark.parametrize("per, slot", [("A", 0), ("throttle", 2)])
+def test_px4_power_compensation_round_trip(per, slot):
+    rng = np.random.default_rng(12)
+    part = _flight_part("gauss", per, [3.5, -2.0, 5.0] if per == "A" else [120.0, -60.0, 200.0],
+                        rng)
+    p = _qgc_load(px4_params_file(tc.Calibration(mag=part), instance=slot))
+    assert p["CAL_MAG_COMP_TYP"] == (2.0 if per == "A" else 1.0)
+    raw = rng.normal(size=(400, 3)) * 0.3 + [0.14, -0.095, 0.06]
+    x = rng.uniform(0, 40, 400) if per == "A" else rng.uniform(0, 1, 400)
+    want = part.apply(raw) + x[:, None] * np.asarray(part.stats["interference"]["vector"])
+    got = _px4_mag_comp(p, raw, x, slot)
+    assert np.max(np.abs(got - want)) < 2e-6 * np.abs(want).max() * 10

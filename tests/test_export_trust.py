@@ -456,7 +456,7 @@ def test_px4_device_id_from_the_log():
     assert given["CAL_ACC0_ID"] == 77
     text = tc.px4_params_file(tc.Calibration(accel=_acc()))
     comments = " ".join(ln[2:] for ln in text.splitlines() if ln.startswith("# "))
-    assert "CAL_ACC0_ID not written" in comments and "--device-id accel=ID" in comments
+    assert "CAL_ACC0_ID not written" in comments and "device_ids={'accel': ID}" in comments
 
 
 # ------------------------------------------------------------------------ Kalibr YAML

@@ -292,3 +292,39 @@ def test_the_gate_judges_an_unsigned_adcs_offset_from_its_mid_scale():
         assert not v.valid and "its offset reaches" in v.reasons[0]
     # readings in m/s^2 are never taken for ADC codes
     assert not check(xsens.replace(raw_unit="m/s^2", matrix=np.eye(3)), "accel").valid
+
+
+# --- the documentation page, as written --------------------------------------------------------
+
+
+def test_method_commands_page_runs_on_the_real_recordings(realdata, tmp_path, monkeypatch,
+                                                          capsys):
+    """The blocks of docs/guide/method-commands.md marked ``realdata``, in order, in a folder
+    laid out as the data registry lays out the recordings: each command prints what the page
+    shows."""
+    import shlex
+
+    from test_seed_commands import PAGE, console, page_blocks
+
+    for folder in realdata.iterdir():
+        (tmp_path / folder.name).symlink_to(folder, target_is_directory=True)
+    monkeypatch.chdir(tmp_path)
+    blocks = page_blocks(realdata=True)
+    ran = []
+    for info, body in blocks:
+        if info.split()[0] == "python":
+            exec(compile(body, str(PAGE), "exec"), {})
+        elif info.split()[0] == "console":
+            for cmd, want in console(body):
+                argv = shlex.split(cmd)
+                assert argv[0] == "triaxcal"
+                capsys.readouterr()
+                rc = main(argv[1:])
+                got = [ln.rstrip() for ln in capsys.readouterr().out.splitlines()]
+                assert rc == 0, cmd
+                assert got == want, f"{cmd}\n--- page\n" + "\n".join(want) + "\n--- now\n" + \
+                    "\n".join(got)
+                ran.append(argv[1])
+    assert {"ferraris", "imu", "turntable", "gyro-gains"} <= set(ran)
+    cal = tc.Calibration.load(tmp_path / "whole.json")
+    assert cal.gyro.stats["gain_from"] == ["existing part", "existing part", "turns"]

@@ -161,14 +161,14 @@ def test_the_demo_session_is_refused_as_moving(demo_dir, capsys):
     """Before: 'the t column does not increase'; with --rate 100, confident random walks."""
     session = str(demo_dir / "session.csv")
     capsys.readouterr()
-    assert main(["noise", session]) == 1
+    assert main(["noise", session]) == 2  # a refusal, as the validity gate's
     err = capsys.readouterr().err
     assert "the gyroscope turns at up to" in err and "record the board lying still" in err
     assert "--force" in err and "Traceback" not in err
-    assert main(["noise", session, "--sensor", "accel"]) == 1
+    assert main(["noise", session, "--sensor", "accel"]) == 2
     assert "the accelerometer moves" in capsys.readouterr().err
     # the rate given by hand changes nothing: the readings moved
-    assert main(["noise", session, "--rate", "100"]) == 1
+    assert main(["noise", session, "--rate", "100"]) == 2
     err = capsys.readouterr().err
     assert "--rate is now --rate-hz" in err and "the gyroscope turns at up to" in err
 
@@ -199,7 +199,7 @@ def test_a_bag_whose_gyroscope_turns_is_refused(realdata, capsys):
     Before: noise figures with exit 0 and no word that the data are not at rest."""
     pytest.importorskip("rosbags")
     bag = realdata / "ros1-imu-tools-madgwick" / "phidgets_imu_upside_down.bag"
-    assert main(["noise", str(bag)]) == 1
+    assert main(["noise", str(bag)]) == 2
     err = capsys.readouterr().err
     assert "the gyroscope turns at up to 0.89 rad/s" in err
     assert "at rest it changes by less than 0.01 rad/s" in err

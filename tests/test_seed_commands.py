@@ -17,9 +17,12 @@ ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "guide" / "method-commands.md"
 
 
-def page_blocks() -> list[tuple[str, str]]:
-    """(info string, body) of every fenced block of the page, in order."""
-    return re.findall(r"```([^\n]*)\n(.*?)```", PAGE.read_text(), re.S)
+def page_blocks(realdata: bool = False) -> list[tuple[str, str]]:
+    """(info string, body) of every fenced block of the page, in order: those that run on the
+    simulator, or (``realdata``) those marked ``realdata``, which run on the published
+    recordings (tests/test_method_commands.py)."""
+    blocks = re.findall(r"```([^\n]*)\n(.*?)```", PAGE.read_text(), re.S)
+    return [(info, body) for info, body in blocks if ("realdata" in info.split()) == realdata]
 
 
 def console(body: str) -> list[tuple[str, list[str]]]:

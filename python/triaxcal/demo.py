@@ -29,6 +29,7 @@ import numpy as np
 from ._checks.options import choice, number
 from ._checks.spelling import opt
 from .calibration.file import Calibration
+from .calibration.gate import check_part, direction_stats, judged
 from .calibration.part import SensorCalibration
 from .capture.run import CaptureResult, capture, channel_names, read_session
 from .detect.session import PoseSettings, session_poses
@@ -234,14 +235,16 @@ def _analyse(out: Path, session: Path, protocol: str, speed: float, seed: int, p
         low = coverage_warning(cov_part, "accel" if unit == "g" else "mag")
         if low:
             stats["warnings"] = [*stats.get("warnings", []), low]
-        return SensorCalibration(**{**{k: getattr(p, k) for k in (
-            "offset", "matrix", "raw_unit", "unit", "radius", "model", "temperature",
-            "input_sha256", "source")}, "stats": stats})
+        stats["directions"] = direction_stats(p, pts)
+        return p.replace(stats=stats)
 
+    # every part through the validity gate, as `triaxcal fit` writes them
+    parts = {"accel": part(accel_fit, a_cols, "g"), "gyro": gyro_part,
+             "mag": part(mag_fit, m_cols, "uT")}
     cal = Calibration(
-        accel=part(accel_fit, a_cols, "g"),
-        gyro=gyro_part,
-        mag=part(mag_fit, m_cols, "uT"),
+        accel=judged(parts["accel"], check_part(parts["accel"], "accel")),
+        gyro=judged(parts["gyro"], check_part(parts["gyro"], "gyro")),
+        mag=judged(parts["mag"], check_part(parts["mag"], "mag")),
         sensor_id=f"triaxcal-sim-seed{seed}",
     )
     outputs = write_outputs(

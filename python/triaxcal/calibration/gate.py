@@ -2,9 +2,11 @@
 
 A fit can converge and still not be a calibration: readings that do not lie on an ellipsoid at
 all, that cover a cap or a band of the sphere too small for the model, that carry only
-directions, or coefficients no sensor has. :func:`check_part` says so, with the reasons in words and
-what to record instead. Everything that writes or ships a calibration calls it: ``triaxcal fit``
-and ``batch``, the live page's Save, the methods' ``part_from_*``, every export, ``send``.
+directions, or coefficients no sensor has. :func:`check_part` says so, with the reasons in words
+and what to record instead (the sensor's general advice, or the part's own when its method gave
+one: ``stats["record_instead"]``). Everything that writes or ships a calibration calls it:
+``triaxcal fit`` and ``batch``, the live page's Save, the methods' ``part_from_*``, every
+export, ``send``.
 Nothing refused is written unless the user forces it (``--force``, ``force=True``); then the
 part is marked ``valid: false`` with the reasons, and every export of it is refused again unless
 forced again, and then says so in what it writes.
@@ -49,7 +51,7 @@ import numpy as np
 
 from .._checks.arrays import as_points
 from ..conventions.units import UNITS, unit_factor
-from ..errors import CalibrationError
+from ..errors import CalibrationError, RefusedError
 from ..quality import bounds as B
 from .part import SensorCalibration
 
@@ -91,16 +93,21 @@ class Verdict:
         Why not, in words (empty when valid).
     sensor : str
         The sensor judged (``"accel"``, ``"gyro"``, ``"mag"``).
+    advice : str, optional
+        What to record instead, when the part's method knows better than the sensor's
+        general advice (a part's ``stats["record_instead"]``).
     """
 
     valid: bool
     reasons: tuple[str, ...]
     sensor: str
+    advice: str | None = None
 
     @property
     def record_instead(self) -> str:
-        """What to record instead (for the sensor judged)."""
-        return RECORD_INSTEAD.get(self.sensor, RECORD_INSTEAD["mag"])
+        """What to record instead: the part's own advice when its method gave one
+        (``stats["record_instead"]``, e.g. a flight log's), else the sensor's."""
+        return self.advice or RECORD_INSTEAD.get(self.sensor, RECORD_INSTEAD["mag"])
 
     def text(self, what: str = "this fit") -> str:
         """``"this accel fit is not a calibration: ...; record instead: ..."``."""
@@ -110,9 +117,11 @@ class Verdict:
                 + f". Record instead: {self.record_instead}")
 
 
-class InvalidCalibrationError(CalibrationError):
+class InvalidCalibrationError(RefusedError):
     """A part the validity gate refused; ``verdict`` holds the reasons. The command line exits
     with status 2 for it (a refusal, not a failure to run)."""
+
+    verb = "not written"
 
     def __init__(self, message: str, verdict: Verdict) -> None:
         super().__init__(message)
@@ -330,7 +339,13 @@ def check_part(part: SensorCalibration, sensor: str, *, points: Any = None) -> V
     if isinstance(und, Sequence) and not isinstance(und, str):
         why += [str(u) for u in und]
     why = list(dict.fromkeys(why))
-    return Verdict(valid=not why, reasons=tuple(why), sensor=sensor)
+    return Verdict(valid=not why, reasons=tuple(why), sensor=sensor, advice=_advice(part))
+
+
+def _advice(part: SensorCalibration) -> str | None:
+    """The part's own advice on what to record instead (``stats["record_instead"]``)."""
+    a = part.stats.get("record_instead")
+    return a if isinstance(a, str) and a.strip() else None
 
 
 def judged(part: SensorCalibration, verdict: Verdict, *, force: bool = False
@@ -359,9 +374,10 @@ def require_valid(part: SensorCalibration, sensor: str, *, force: bool = False,
     judged now from its coefficients and stored statistics. Returns the verdict (the caller
     marks what it writes when ``force`` let an invalid part through)."""
     if part.valid is False:
-        verdict = Verdict(False, part.invalid_reasons or ("it is marked not valid",), sensor)
+        verdict = Verdict(False, part.invalid_reasons or ("it is marked not valid",), sensor,
+                          _advice(part))
     elif part.valid is True:
-        verdict = Verdict(True, (), sensor)
+        verdict = Verdict(True, (), sensor, _advice(part))
     else:
         verdict = check_part(part, sensor)
     if not verdict.valid and not force:

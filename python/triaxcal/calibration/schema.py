@@ -137,6 +137,7 @@ STATS_FIELDS: dict[str, Field] = {
     "forced": Field(boolean),
     "interference": Field(lambda v, w: _interference(v, w)),
     "undetermined": Field(list_of(text(MAX_TEXT, plain=False), max_items=64)),
+    "record_instead": Field(optional(text(MAX_TEXT, plain=False))),
 }
 
 

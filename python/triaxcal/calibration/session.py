@@ -48,6 +48,8 @@ class FitOutcome:
     #: Things to tell the user about the input (skipped lines, an implausible radius).
     notes: list[str] = field(default_factory=list)
     expected: ExpectedField | None = None
+    #: ``--method attitude``: the flight log's readings with attitude (a FlightSource).
+    flight: Any = None
 
 
 def fit_session(
@@ -72,8 +74,9 @@ def fit_session(
     Returns
     -------
     FitOutcome
-        The part (not yet judged by the validity gate: :func:`~triaxcal.calibration.gate.check`),
-        the points fitted, the rejected indices and what to tell the user.
+        The part (not yet judged by the validity gate:
+        :func:`~triaxcal.calibration.gate.check_part`), the points fitted, the rejected indices and
+        what to tell the user.
     """
     from ..fit.select import fit_robust
 
@@ -96,7 +99,7 @@ def fit_session(
         return FitOutcome(part=part, points=fsrc.raw, sensor=sensor,
                           rejected=np.asarray(part.stats.get("rejected", []), dtype=np.int64),
                           reason=None, table=None, source=None, notes=notes,
-                          expected=part.expected_field)
+                          expected=part.expected_field, flight=fsrc)
     expected = expected_for(req)
     src = table_source(data, sensor, req.source) if isinstance(data, Table) else load_source(
         data, sensor, req.source)

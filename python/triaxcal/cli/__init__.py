@@ -10,8 +10,7 @@ from typing import Sequence
 
 from .. import __version__
 from .._checks.spelling import command_line
-from ..calibration.gate import InvalidCalibrationError
-from ..errors import CalibrationError
+from ..errors import CalibrationError, RefusedError
 from ..io.files import os_error_message
 from ._help import PlainHelpFormatter, missing_required
 
@@ -55,8 +54,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with command_line():  # messages name the options as flags
             return int(args.func(args) or 0)
-    except InvalidCalibrationError as exc:  # the validity gate refused: nothing was written
-        print(f"triaxcal {args.command}: not written: {exc}", file=sys.stderr)
+    except RefusedError as exc:  # refused (the validity gate, data not at rest): nothing written
+        print(f"triaxcal {args.command}: {exc.verb}: {exc}", file=sys.stderr)
         return 2
     except CalibrationError as exc:
         print(f"triaxcal {args.command}: error: {exc}", file=sys.stderr)

@@ -9,10 +9,9 @@ import sys
 from ..capture.multi import capture_many
 from ..capture.run import channel_names
 from ..errors import CalibrationError
-from .capture import poll_interval_s
 
 
-def run_many(args: argparse.Namespace, channels: int | None) -> int:
+def run_many(args: argparse.Namespace, channels: int | None, poll_interval_s: float) -> int:
     if args.output is not None:
         raise CalibrationError(
             "several --port: give --out-dir DIR (one session file per board), not -o/--output"
@@ -40,7 +39,7 @@ def run_many(args: argparse.Namespace, channels: int | None) -> int:
             "stream": args.stream,
             "request_byte": args.request_byte,
             "switch_mode": not args.no_mode_byte,
-            "poll_interval_s": poll_interval_s(args),
+            "poll_interval_s": poll_interval_s,
             "board_poses": getattr(args, "board_settings", None),
         },
         samples=args.samples,

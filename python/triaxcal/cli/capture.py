@@ -216,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out_dir is not None or len(args.port) > 1:
         from ._multicapture import run_many
 
-        return run_many(args, channels)
+        return run_many(args, channels, poll_interval_s(args))
     if args.output is None:
         raise CalibrationError("give -o SESSION.csv (or --out-dir DIR)")
     port = args.port[0]

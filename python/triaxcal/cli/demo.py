@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..calibration.flight import write_demo_flight
 from ..demo import run_demo
 from ..io.protocol import PROTOCOLS
 from ._help import renamed
@@ -38,6 +39,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "that the sphere fills in about 40 s)")
     p.add_argument("--seed", type=int, default=1, help="seed of the simulated sensor (default 1)")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
+    p.add_argument("--flight", action="store_true",
+                   help="instead: write a simulated flight with known compass errors, DIR/"
+                        "flight.BIN (ArduPilot), DIR/flight.ulg (PX4) and DIR/flight_truth.json, "
+                        "for triaxcal fit DIR/flight.BIN --sensor mag --method attitude")
     add_pose_options(p)
     add_live_options(p)
     p.set_defaults(func=run)
@@ -45,6 +50,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out_dir)
+    if args.flight:  # the simulated flight logs and their truth, nothing else
+        for kind, path in write_demo_flight(out).items():
+            print(f"{kind}: {path}")
+        return 0
     if args.speed is None:
         args.speed = 5.0 if args.live else 40.0
     live = None

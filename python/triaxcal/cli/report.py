@@ -19,7 +19,10 @@ from pathlib import Path
 from typing import Any
 
 from ..calibration.file import Calibration
+from ..calibration.flight import flight_source
+from ..calibration.gate import check_part
 from ..calibration.part import SensorCalibration
+from ..calibration.request import FitRequest, SourceOptions
 from ..calibration.session import fit_session
 from ..calibration.source import load_source
 from ..detect.session import pose_points, stored_settings
@@ -30,9 +33,10 @@ from ..io.logs import is_log
 from ..io.sections import tilt_points
 from ..io.tables import pick_columns, read_table
 from ..report import QualityReport, plot_report, quality_report
-from ..report.text import stored_text, summary_only, summary_text
+from ..report.flight import flight_check, flight_text, plot_flight
+from ..report.text import coefficient_table, printable, stored_text, summary_only, summary_text
 from ._calfile import file_sha256
-from ._fit_options import add_fit_options, fit_request
+from ._fit_options import add_field_options, add_fit_options, fit_request
 from ._help import renamed
 
 
@@ -55,6 +59,7 @@ def register(subparsers: Any) -> None:
                    help="also write the numbers as JSON")
     renamed(p, "--json", "--output")
     add_fit_options(p)
+    add_field_options(p)
     p.set_defaults(func=run)
 
 
@@ -127,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.json_out, "report")
     skip = getattr(args, "skip_bad_lines", False)
     reports: dict[str, QualityReport] = {}
+    numbers: dict[str, Any] = {}
     if _is_calibration(path):
         if getattr(args, "bootstrap", 0):
             raise CalibrationError(
@@ -137,6 +143,9 @@ def run(args: argparse.Namespace) -> int:
         sensors = [args.sensor] if args.sensor else list(cal.sensors)
         for sensor in sensors:
             part = cal.part(sensor)
+            if part.model == "attitude":  # a compass calibrated from a flight
+                _attitude_report(path, part, sensor, args, len(sensors) > 1, numbers)
+                continue
             src = Path(args.data_file) if args.data_file else _find_source(path, part)
             if src is not None and part.model not in MODELS:
                 print(stored_text(sensor, part,
@@ -196,6 +205,9 @@ def run(args: argparse.Namespace) -> int:
         res = fit_session(args.data, fit_request(args))
         for n in res.notes:
             print(f"  {n}", file=sys.stderr)
+        if res.flight is not None:
+            _print_flight(res.part, res.flight, res.sensor, args, False, numbers)
+            return _write_json(args, reports, numbers)
         rep = quality_report(res.points, res.part, sensor=res.sensor,
                              rejected=res.rejected.tolist(), model_reason=res.reason)
         reports[res.sensor] = rep
@@ -203,9 +215,59 @@ def run(args: argparse.Namespace) -> int:
         if args.plot:
             out = plot_report(res.points, res.part, args.plot, report=rep)
             print(f"  figure: {out}")
+    return _write_json(args, reports, numbers)
+
+
+def _write_json(args: argparse.Namespace, reports: dict[str, QualityReport],
+                numbers: dict[str, Any]) -> int:
     if args.json_out:
-        write_file(args.json_out,
-                   json.dumps({k: r.to_dict() for k, r in reports.items()}, indent=2) + "\n",
-                   what="report")
+        out = {**{k: r.to_dict() for k, r in reports.items()}, **numbers}
+        write_file(args.json_out, json.dumps(out, indent=2) + "\n", what="report")
         print(f"  numbers: {args.json_out}")
     return 0
+
+
+def _attitude_report(cal_path: Path, part: SensorCalibration, sensor: str,
+                     args: argparse.Namespace, many: bool, numbers: dict[str, Any]) -> None:
+    """A compass calibrated from a flight (``--method attitude``): its held-out check,
+    recomputed on the log it was fitted on (found by the part's source path and checked by its
+    SHA-256, or given with ``--data``)."""
+    src = Path(args.data_file) if args.data_file else _find_source(cal_path, part)
+    if src is None:
+        print(stored_text(sensor, part, "pass --data LOG for the held-out check and figure"))
+        if args.plot:
+            print(f"  (no figure for {sensor}: its flight log {printable(part.source)!r} was "
+                  "not found; pass --data LOG)", file=sys.stderr)
+        return
+    if args.data_file is None and part.input_sha256 not in (None, file_sha256(src)):
+        raise CalibrationError(
+            f"{src} has changed since the calibration was made (SHA-256 differs): pass "
+            "--data FILE explicitly to judge the calibration on it anyway")
+    log = part.stats.get("log") or {}
+    inst = log.get("instance")
+    request = FitRequest(sensor="mag", method="attitude",
+                         source=SourceOptions(instance=inst if isinstance(inst, int) else None))
+    _print_flight(part, flight_source(src, request), sensor, args, many, numbers)
+
+
+def _print_flight(part: SensorCalibration, src: Any, sensor: str, args: argparse.Namespace,
+                  many: bool, numbers: dict[str, Any]) -> None:
+    print("\n".join(coefficient_table(part, sensor)))
+    inter = part.stats.get("interference")
+    if isinstance(inter, dict):
+        per = "A" if inter.get("per") == "A" else "unit of throttle"
+        print("  interference  " + "  ".join(f"{float(v):.4g}" for v in inter["vector"])
+              + f"  {part.unit} per {per}, ADDED after the matrix "
+              f"({printable(inter.get('source'))})")
+    verdict = check_part(part, sensor)
+    print("  " + verdict.text("this flight calibration"))
+    try:
+        check = flight_check(part, src)
+    except CalibrationError as exc:  # e.g. the fit on one half failed: nothing to draw
+        print(f"  (no held-out check: {exc})")
+        return
+    print(flight_text(part, check, sensor))
+    numbers[sensor] = check.to_dict()
+    if args.plot:
+        out = plot_flight(part, check, _plot_path(args.plot, sensor, many))
+        print(f"  figure: {out}")

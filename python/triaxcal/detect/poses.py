@@ -1,6 +1,5 @@
-"""Still poses: :func:`detect_poses` (offline) and :class:`PoseDetector` (online), the original "
-"method's
-window method on every sensor of the board."""
+"""Still poses: :func:`detect_poses` (offline) and :class:`PoseDetector` (online), the
+sphere-centre method's window rule on every sensor of the board."""
 
 from __future__ import annotations
 

@@ -330,9 +330,12 @@ def ardupilot_parm(cal: Calibration, **kwargs: Any) -> str:
     params, prep = _ardupilot(cal, **kwargs)
     head = [
         f"# ArduPilot parameters written by triaxcal {__version__}",
-        f"# sensor id: {_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
+        f"# sensor id: {_comment(cal.sensor_id) or '(none)'}; created "
+        f"{_comment(cal.created_utc)}",
         "# compass: field = M @ ((raw + COMPASS_OFS) * COMPASS_SCALE)   [mG, body frame]",
         "#          (COMPASS_ORIENT, when written, rotates raw first; external compasses only)",
+        *(["#          + COMPASS_MOT * (battery current in A if COMPASS_MOTCT = 2, throttle "
+           "0..1 if 1)"] if "COMPASS_MOTCT" in params else []),
         "# accel:   (raw - tcal(T) - INS_ACCOFFS) * INS_ACCSCAL          [m/s^2, sensor frame]",
         "# gyro:     raw - tcal(T) - INS_GYROFFS                          [rad/s, sensor frame]",
         "# Gyro offsets are measured again at every boot unless INS_GYR_CAL = 0.",

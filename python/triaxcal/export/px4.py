@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import in_command_line
 from .._core import __version__
 from ..calibration.file import Calibration
 from ..conventions.autopilot import (
@@ -216,7 +217,9 @@ def _px4(cal: Calibration, *, instance: int = 0, sensors: Iterable[str] | None =
         else:
             omitted.append(
                 f"{cp}ID not written: the {sensor}'s device id is not known (give it with "
-                f"--device-id {sensor}=ID, the vehicle's {cp}ID; device_ids= in Python), "
+                + (f"--device-id {sensor}=ID" if in_command_line() else
+                   f"device_ids={{{sensor!r}: ID}}")
+                + f", the vehicle's {cp}ID), "
                 f"so these values apply to whichever device the vehicle's {cp}ID names")
         offset = p.offset
         for i, a in enumerate("XYZ"):
@@ -287,9 +290,12 @@ def px4_params_file(
         f"# Onboard parameters for Vehicle {system_id}",
         "#",
         f"# Calibration written by triaxcal {__version__}; sensor id "
-        f"{_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
+        f"{_comment(cal.sensor_id) or '(none)'}; created {_comment(cal.created_utc)}",
         "# accel = (raw - thermal - CAL_ACCn_OFF) * CAL_ACCn_SCALE; gyro = raw - thermal - "
         "CAL_GYROn_OFF; mag = R S (raw - CAL_MAGn_OFF), R = CAL_MAGn_ROT (external magnetometers)",
+        *(["# with CAL_MAG_COMP_TYP: mag = R S ((raw + power * CAL_MAGn_xCOMP) - OFF), power = "
+           "battery current in kA (2) or throttle 0..1 (1)"]
+          if any(name == PX4_COMP_TYPE for name, _, _ in params) else []),
         *comment_lines((*mark_lines(prep.invalid), *prep.notes, *omitted)),
         "#",
         "# Vehicle-Id Component-Id Name Value Type",

@@ -1,4 +1,4 @@
-"""The zero offset as the centre of a sphere of known radius (sphere-center-descent.txt).
+"""The zero offset as the centre of a sphere of known radius (the sphere-centre descent).
 
 The readings lie on a sphere of radius ``R`` (16384 counts = 1 g for a 16-bit +-2 g
 accelerometer) around the unknown offset; because ``R`` is known, a part of the sphere (a

@@ -67,6 +67,7 @@ from ..conventions.names import COEFFICIENTS
 from ..errors import CalibrationError
 from ..io.files import check_regular, open_regular, read_bounded
 from ..io.tables import _is_number, _plain, iter_csv
+from ..quality.bounds import LOW_COVERAGE_PCT
 from ..quality.coverage import coverage
 
 __all__ = [
@@ -106,7 +107,7 @@ class Limits:
     stuck_max_pct: float = 5.0
     full_scale: float = 32767.0
     saturation_max_pct: float = 0.1
-    coverage_min_pct: float = 40.0
+    coverage_min_pct: float = LOW_COVERAGE_PCT
     min_points: int = 12
     rms_max_pct: float = 1.0
     noise_max: float = 0.01

@@ -25,8 +25,11 @@ very compass, since comparing a compass with a heading made from it would be cir
 The minimisation is Levenberg-Marquardt with analytic derivatives, vectorised over the
 samples in numpy (a few milliseconds for thousands of samples), with one round that drops
 readings whose residual is more than ``REJECT_MAD`` robust deviations out (spikes, a motor
-start). Unknown field: its direction is fitted and its strength set to the data's own (the
-overall scale is then not determined, and said so).
+start). Unknown field: the field is fitted too; its strength and the gains then trade off (the
+data cannot tell a stronger field from a larger gain), so the mean of the three gains is held
+at 1 (``diag_x = 3 - diag_y - diag_z``) and the field's strength is the readings' own. Holding
+one axis's gain instead would leave the others free to shrink towards a compass that reads a
+constant, which a level flight with roll and pitch only (``heading="free"``) cannot refute.
 
 What the data determine is read from the fit's covariance: a parameter whose standard error
 exceeds its tolerance (:mod:`triaxcal.quality.bounds`: ``ATTITUDE_TOLERANCE``) is not
@@ -161,7 +164,8 @@ class _Model:
 
     def __init__(self, raw: np.ndarray, dcm: np.ndarray, x: np.ndarray | None, heading: str,
                  soft: str, field_ned: np.ndarray | None, strength: float,
-                 held: dict[int, float], prior_weight: float = 0.0) -> None:
+                 held: dict[int, float], prior_weight: float = 0.0,
+                 mean_gain: bool = False) -> None:
         self.raw, self.dcm, self.x = raw, dcm, x
         self.heading, self.soft = heading, soft
         self.known = field_ned
@@ -169,7 +173,10 @@ class _Model:
         self.held = held  # index in _UPPER -> value
         self.m_prior = np.zeros(0)
         self.prior_weight = prior_weight
+        # the mean of the three gains held at 1: diag_x = 3 - diag_y - diag_z (field unknown)
+        self.mean_gain = mean_gain and soft != "scale"
         self.m_free = [k for k in range(6) if k not in held and
+                       not (self.mean_gain and k == 0) and
                        (soft == "full" or (soft == "diagonal" and k < 3) or
                         (soft == "scale" and k == 0))]
         if heading == "free":
@@ -191,6 +198,8 @@ class _Model:
         if self.soft == "scale":
             s = vals.get(0, 1.0)
             return np.eye(3) * s
+        if self.mean_gain:
+            vals[0] = 3.0 - vals.get(1, 1.0) - vals.get(2, 1.0)
         for k in range(6):
             i, j = _UPPER[k]
             v = vals.get(k, 1.0 if k < 3 else 0.0)
@@ -255,6 +264,8 @@ class _Model:
                 dc[:, i, col] = d[:, j]
                 if i != j:
                     dc[:, j, col] = d[:, i]
+                elif self.mean_gain:  # diag_x = 3 - diag_y - diag_z moves with it
+                    dc[:, 0, col] -= d[:, 0]
             k = 3 + len(self.m_free)
             if x is not None:
                 for a in range(3):
@@ -363,7 +374,7 @@ def fit_attitude(
     field_ned : array_like (3,), optional
         The Earth's field (north, east, down) in the readings' unit (the World Magnetic
         Model's). Without it the field is fitted too, and the overall scale, which the data
-        then cannot tell from the field's strength, is set by holding the x gain at 1.
+        then cannot tell from the field's strength, is set by holding the mean gain at 1.
     heading : {"attitude", "free"}
         Use the attitude's yaw (the field vector) or only its roll and pitch.
     soft_iron : {"full", "diagonal", "scale"}
@@ -406,21 +417,25 @@ def fit_attitude(
     o0, radius = _initial(r)
     held: dict[int, float] = {}
     held_why: dict[str, str] = {}
+    mean_gain = known is None and soft_iron != "scale"
     if known is not None:
         f0 = float(np.linalg.norm(known))
     else:
         f0 = radius
-        held[0] = 1.0
-        held_why["scale" if soft_iron == "scale" else "diag_x"] = (
+        if soft_iron == "scale":
+            held[0] = 1.0
+        held_why["scale" if soft_iron == "scale" else "mean_gain"] = (
             "held at 1: without the field's strength (no position for the World Magnetic "
-            "Model) the data cannot tell the scale from the field; the scale is the x axis's")
+            "Model) the data cannot tell the scale from the field; "
+            + ("the scale is 1" if soft_iron == "scale" else
+               "the mean of the three gains is 1 (diag_x = 3 - diag_y - diag_z)"))
     idx = np.arange(len(r))
     rejected = np.zeros(0, dtype=np.int64)
     # 1. which soft-iron terms do the data determine? A prior as strong as the data pins the
     #    ones they leave free (at their starting value), so that their standard errors are
     #    read where they would be held rather than wherever a free direction wandered to.
     model = _Model(r, dcm, xs, heading, soft_iron, known, f0, held,
-                   prior_weight=PRIOR_WEIGHT * math.sqrt(len(r)))
+                   prior_weight=PRIOR_WEIGHT * math.sqrt(len(r)), mean_gain=mean_gain)
     p, _, _ = _lm(model, _start(model, o0, radius, f0, xs), idx)
     se = _geometry_stderr(model, p, idx)
     tol = B.ATTITUDE_TOLERANCE["soft_iron"]
@@ -433,7 +448,7 @@ def fit_attitude(
                 f"{se[col]:.3g}, at most {tol:g})")
     # 2. the fit of what is determined; 3. once more without the outliers
     for round_ in range(2):
-        model = _Model(r, dcm, xs, heading, soft_iron, known, f0, held)
+        model = _Model(r, dcm, xs, heading, soft_iron, known, f0, held, mean_gain=mean_gain)
         p, iters, converged = _lm(model, _start(model, o0, radius, f0, xs), idx)
         res, jac = model.residuals(p, idx)
         assert jac is not None

@@ -40,7 +40,7 @@ from .._checks import options
 from .._checks.arrays import as_samples
 from .._checks.spelling import opt
 from ..conventions.units import UNITS
-from ..errors import CalibrationError
+from ..errors import CalibrationError, RefusedError
 from ..quality.bounds import (
     REST_FLOOR,
     REST_HORIZON_S,
@@ -64,7 +64,7 @@ _WHAT = {"gyro": ("gyroscope", "rate"), "accel": ("accelerometer", "reading"),
          None: ("sensor", "reading")}
 
 
-class NotAtRestError(CalibrationError):
+class NotAtRestError(RefusedError):
     """The readings were not at rest: noise figures of them would be wrong (the message names
     the motion found and what to do)."""
 

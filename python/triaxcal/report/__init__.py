@@ -7,13 +7,12 @@ from .figure import plot_report, report_figure
 from .quality import (
     QualityReport,
     cap_words,
-    context_lines,
     direction_words,
     empty_regions,
     have_matplotlib,
     quality_report,
 )
-from .text import coefficient_table
+from .text import coefficient_table, context_lines
 
 #: The public names (``triaxcal.__all__`` gathers them).
 __all__ = ["QualityReport", "coefficient_table", "plot_report", "quality_report"]

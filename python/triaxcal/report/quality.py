@@ -40,7 +40,7 @@ from ..conventions.units import per_unit
 from ..errors import CalibrationError
 from ..quality.caps import largest_empty_caps
 from ..quality.coverage import Coverage, coverage, coverage_warning
-from .text import coefficient_table, printable
+from .text import coefficient_table, context_lines, printable
 
 __all__ = [
     "QualityReport",
@@ -404,53 +404,6 @@ def _check_sensor(sensor: Any) -> None:
             f"sensor must be None or one of {', '.join(repr(x) for x in SENSORS)}, got "
             f"{sensor!r}"
         )
-
-
-def context_lines(part: SensorCalibration) -> list[str]:
-    """Report lines on a magnetometer's surroundings: the expected field, the alignment with
-    the accelerometer and the heading check, a yaw-only calibration's limits (empty for
-    other parts)."""
-    lines: list[str] = []
-    f = part.expected_field
-    if f is not None:
-        lines.append(f"  expected field  {f.model} at {f.lat_deg:.4f}, {f.lon_deg:.4f}, "
-                     f"{f.alt_m:.0f} m on {f.date}:")
-        lines.append(f"                  total {f.total_ut:.2f} uT, horizontal "
-                     f"{f.horizontal_ut:.2f} uT, inclination {f.inclination_deg:.2f} deg, "
-                     f"declination {f.declination_deg:.2f} deg")
-        shown = part.stats.get("field_strength_ut")
-        if shown is not None:
-            what = "horizontal" if part.model == "yaw" else "total"
-            ref = f.horizontal_ut if part.model == "yaw" else f.total_ut
-            lines.append(f"                  the readings show {shown:.4g} uT {what} "
-                         f"({100 * (shown / ref - 1):+.1f} %)")
-        elif part.raw_unit == "counts":
-            lines.append("                  (raw counts: their strength is not compared; "
-                         "--raw-unit names a physical unit)")
-    al = part.alignment
-    if al is not None:
-        st = al.stats
-        from ..conventions.rotations import rotation_angle_deg
-
-        mnt = (f"{al.mounting} + {al.mounting_residual_deg:.2f} deg" if al.mounting
-               else "not a right-angle mounting")
-        ang = rotation_angle_deg(al.rotation)
-        lines.append(f"  alignment       into the {al.to} frame: {ang:.2f} deg ({mnt})")
-        if "dip_deg" in st:
-            lines.append(f"                  dip {st['dip_deg']:.2f} deg; spread over "
-                         f"{st.get('n_fit', '?')} poses {st['dip_std_before_deg']:.3f} deg "
-                         f"before, {st['dip_std_after_deg']:.3f} deg after")
-        if st.get("heading_rms_est_deg") is not None:
-            lines.append(f"  heading check   {st['n_heldout']} held-out poses: dip spread "
-                         f"{st['dip_std_heldout_before_deg']:.3f} -> "
-                         f"{st['dip_std_heldout_after_deg']:.3f} deg; heading error about "
-                         f"{st['heading_rms_est_deg']:.2f} deg rms (from the dip residuals)")
-    y = part.stats.get("yaw")
-    if isinstance(y, dict) and "determined" in y:
-        from ..methods.yaw import yaw_text
-
-        lines += ["  " + ln for ln in yaw_text(y, part.unit).splitlines()]
-    return lines
 
 
 def _warnings(part: SensorCalibration, fit: Any, sensor: str | None, n: int, rej: list[int],

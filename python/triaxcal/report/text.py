@@ -17,7 +17,8 @@ from ..conventions.names import SENSORS
 from ..conventions.units import per_unit
 from ..errors import CalibrationError
 
-__all__ = ["SUMMARY_METHODS", "SUMMARY_MODELS", "coefficient_table", "fit_lines", "printable",
+__all__ = ["SUMMARY_METHODS", "SUMMARY_MODELS", "coefficient_table", "context_lines", "fit_lines",
+           "printable",
            "stderr_lines", "stored_text", "summary_only", "summary_text"]
 
 #: Parts whose readings do not lie on a sphere: reported by their stored numbers.
@@ -125,8 +126,8 @@ def fit_lines(saved: Any) -> list[str]:
         f"{part.unit}), model {part.model}, {s['n']} readings used, {len(out.rejected)} "
         f"rejected; residual RMS {s['rms']:.4g} {part.unit}"
         + ("" if rms_pct is None else f" ({rms_pct:.3g} % of radius)")
-        + f"; std/mean of |v| {'n/a' if som is None else f'{100 * som:.3g} %'}; coverage "
-        f"{s.get('coverage_pct', 0.0):.0f} %"
+        + f"; std/mean of |v| {'n/a' if som is None else f'{100 * som:.3g} %'}"
+        + ("" if s.get("coverage_pct") is None else f"; coverage {s['coverage_pct']:.0f} %")
         + ("" if part.valid is not False else "; NOT VALID (written with --force)"),
     ]
     lines += ["  " + r for r in coefficient_table(part, out.sensor)]
@@ -210,7 +211,6 @@ def stored_text(sensor: str, part: SensorCalibration,
                 why: str = "pass the data file for the full report and figure") -> str:
     """The statistics stored with a fitted part when its readings are not at hand (``why``
     says so in the first line)."""
-    from .quality import context_lines
 
     s = part.stats
     lines = [(f"{sensor} calibration ({part.raw_unit} -> {part.unit}, model {part.model}): "
@@ -230,3 +230,50 @@ def stored_text(sensor: str, part: SensorCalibration,
     for w in s.get("warnings", []):
         lines.append(f"    - {printable(w)}")
     return "\n".join(lines)
+
+
+def context_lines(part: SensorCalibration) -> list[str]:
+    """Report lines on a magnetometer's surroundings: the expected field, the alignment with
+    the accelerometer and the heading check, a yaw-only calibration's limits (empty for
+    other parts)."""
+    lines: list[str] = []
+    f = part.expected_field
+    if f is not None:
+        lines.append(f"  expected field  {f.model} at {f.lat_deg:.4f}, {f.lon_deg:.4f}, "
+                     f"{f.alt_m:.0f} m on {f.date}:")
+        lines.append(f"                  total {f.total_ut:.2f} uT, horizontal "
+                     f"{f.horizontal_ut:.2f} uT, inclination {f.inclination_deg:.2f} deg, "
+                     f"declination {f.declination_deg:.2f} deg")
+        shown = part.stats.get("field_strength_ut")
+        if shown is not None:
+            what = "horizontal" if part.model == "yaw" else "total"
+            ref = f.horizontal_ut if part.model == "yaw" else f.total_ut
+            lines.append(f"                  the readings show {shown:.4g} uT {what} "
+                         f"({100 * (shown / ref - 1):+.1f} %)")
+        elif part.raw_unit == "counts":
+            lines.append("                  (raw counts: their strength is not compared; "
+                         "--raw-unit names a physical unit)")
+    al = part.alignment
+    if al is not None:
+        st = al.stats
+        from ..conventions.rotations import rotation_angle_deg
+
+        mnt = (f"{al.mounting} + {al.mounting_residual_deg:.2f} deg" if al.mounting
+               else "not a right-angle mounting")
+        ang = rotation_angle_deg(al.rotation)
+        lines.append(f"  alignment       into the {al.to} frame: {ang:.2f} deg ({mnt})")
+        if "dip_deg" in st:
+            lines.append(f"                  dip {st['dip_deg']:.2f} deg; spread over "
+                         f"{st.get('n_fit', '?')} poses {st['dip_std_before_deg']:.3f} deg "
+                         f"before, {st['dip_std_after_deg']:.3f} deg after")
+        if st.get("heading_rms_est_deg") is not None:
+            lines.append(f"  heading check   {st['n_heldout']} held-out poses: dip spread "
+                         f"{st['dip_std_heldout_before_deg']:.3f} -> "
+                         f"{st['dip_std_heldout_after_deg']:.3f} deg; heading error about "
+                         f"{st['heading_rms_est_deg']:.2f} deg rms (from the dip residuals)")
+    y = part.stats.get("yaw")
+    if isinstance(y, dict) and "determined" in y:
+        from ..methods.yaw import yaw_text
+
+        lines += ["  " + ln for ln in yaw_text(y, part.unit).splitlines()]
+    return lines

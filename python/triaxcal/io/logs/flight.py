@@ -90,7 +90,9 @@ class FlightData:
 
 def read_flight(path: str | Path, *, time_origin_us: int | None = None) -> FlightData:
     """The attitude, current, throttle and position in an autopilot log (see the module
-    docstring); ``time_origin_us`` is the log time that is 0 s (default: the first record)."""
+    docstring); ``time_origin_us`` is the log time that is 0 s (the sensor reader's
+    ``rec.meta["time_origin_us"]``; without it the first sensor sample is found, which costs a
+    pass over the sensor messages)."""
     fmt = log_format(path)
     if fmt == "ardupilot-dataflash":
         return _dataflash(Path(path), time_origin_us)
@@ -129,13 +131,14 @@ def _dataflash(p: Path, t0: int | None) -> FlightData:
     first = None
     quiet = io.StringIO()
     log = None
+    # the sensor messages only to find the first sample's time, when the caller does not know it
+    types = ["ATT", "CURR", "BAT", "CTUN", "GPS", "ORGN", *(("IMU", "MAG") if t0 is None else ())]
     try:
         with contextlib.redirect_stdout(quiet):
             log = dfreader.DFReader_binary(str(p), zero_time_base=False)
         while True:
             with contextlib.redirect_stdout(quiet):
-                m = log.recv_match(type=["ATT", "CURR", "BAT", "CTUN", "GPS", "ORGN", "IMU",
-                                         "MAG"])
+                m = log.recv_match(type=types)
             if m is None:
                 break
             kind = m.get_type()
@@ -182,8 +185,8 @@ def _dataflash(p: Path, t0: int | None) -> FlightData:
 def _ulog(p: Path, t0: int | None) -> FlightData:
     pyulog = require("pyulog", "PX4 ULog files")
     topics = ["vehicle_attitude", "battery_status", "actuator_controls_0",
-              "vehicle_gps_position", "vehicle_local_position", "sensor_combined",
-              "vehicle_magnetometer"]
+              "vehicle_gps_position", "vehicle_local_position",
+              *(("sensor_combined", "vehicle_magnetometer") if t0 is None else ())]
     try:
         with open(p, "rb") as fh:
             ulog = pyulog.ULog(fh, topics)
