@@ -95,14 +95,14 @@ def fit_session(
         if isinstance(data, Table):
             raise CalibrationError("--method attitude needs a flight log (.bin, .ulg) with the "
                                    "vehicle's attitude, not a table")
-        part, fsrc = fit_flight(data, req)
+        part, fsrc = fit_flight(os.fspath(data), req)
         return FitOutcome(part=part, points=fsrc.raw, sensor=sensor,
                           rejected=np.asarray(part.stats.get("rejected", []), dtype=np.int64),
                           reason=None, table=None, source=None, notes=notes,
                           expected=part.expected_field, flight=fsrc)
     expected = expected_for(req)
     src = table_source(data, sensor, req.source) if isinstance(data, Table) else load_source(
-        data, sensor, req.source)
+        os.fspath(data), sensor, req.source)
     table, pts = src.table, src.points
     if table is not None:
         notes += [f"note: {n}" for n in table.notes]
