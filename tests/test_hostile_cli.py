@@ -73,17 +73,51 @@ def test_the_valid_file_passes_every_command(files, tmp_path):
         assert code == expected, (name, so, se)
 
 
-@pytest.mark.timeout(300, method="thread")
-def test_hostile_calibration_files(files, tmp_path):
-    """Every mutant loads or is refused; those that load go through every command, those that
-    do not through each command once; no command lets an exception out, hangs, prints raw
-    control characters or writes a file with NaN or infinity in it (or after refusing)."""
+#: The commands every loading mutant of a statistics record meets (the rest of the commands
+#: read the coefficients, not the records; the slow run gives them every command).
+_STATS_CMDS = ("report", "export-c", "export-json")
+#: The commands a refused mutant meets (each must refuse it, on the same load).
+_REFUSED_CMDS = ("report", "export-c", "send")
+#: Values of the coefficients whose mutants also meet ``report`` with the session beside the
+#: file (0.3 s each: the report refits and searches the sphere; the slow run gives it all).
+_WITH_DATA = ("NaN", "1e309", "1e308", "-1e308", "1e-320", "string", "0")
+
+
+def _in_stats(name: str) -> bool:
+    path = name.split("=")[0].split("/")
+    return "stats" in path[:-1] or "previous" in path or name.startswith("parts/accel/stats")
+
+
+def _plan(cases: dict[str, str], loaded: list[str], refused: list[str],
+          full: bool) -> list[tuple[str, tuple[str, ...] | None, bool]]:
+    """(mutant, the commands it meets (None: all), whether the session lies beside it)."""
+    if full:
+        return [(n, None, True) for n in loaded] + [(n, _REFUSED_CMDS, True) for n in refused]
+    plan: list[tuple[str, tuple[str, ...] | None, bool]] = []
+    for n in loaded:
+        if _in_stats(n):
+            plan.append((n, _STATS_CMDS, False))
+        else:
+            plan.append((n, None, False))
+            if n.startswith("impossible:") or n.split("=")[-1] in _WITH_DATA and any(
+                    f"/{k}" in n for k in ("/offset", "/diag", "/offdiag", "/radius")):
+                plan.append((n, ("report",), True))
+    plan += [(n, _REFUSED_CMDS, False) for n in refused[::10]]
+    return plan
+
+
+def _hostile_files(files, tmp_path, full: bool) -> None:
     folder, data, cal = files
     doc = json.loads(cal.read_text())
+    for part in doc["parts"].values():  # found beside the file only (the report's data)
+        if part.get("source"):
+            part["source"] = Path(part["source"]).name
     cases = mutants(doc)
     assert len(cases) > 300
     loaded, refused, failures = [], [], {}
     t0 = time.monotonic()
+    alone = tmp_path / "alone"  # no session beside the file: report prints the stored stats
+    alone.mkdir()
     for name, text in cases.items():
         p = tmp_path / "m.json"
         p.write_text(text, encoding="utf-8", errors="surrogatepass")
@@ -94,14 +128,13 @@ def test_hostile_calibration_files(files, tmp_path):
             refused.append(name)
         except Exception as exc:  # noqa: BLE001
             failures[f"{name}: load"] = f"{type(exc).__name__}: {exc}"
-    # what loads meets every command; what is refused is refused by each (on the same load)
     ran = 0
-    for i, name in enumerate(loaded + refused[::25]):
-        p = tmp_path / f"m{i}.json"
+    for i, (name, keys, beside) in enumerate(_plan(cases, loaded, refused, full)):
+        p = (folder if beside else alone) / f"m{i}.json"
         p.write_text(cases[name], encoding="utf-8", errors="surrogatepass")
         cmds = _commands(p, cal, tmp_path / f"o{i}")
-        if name in refused:
-            cmds = {k: v for k, v in cmds.items() if k in ("report", "export-c", "send")}
+        if keys is not None:
+            cmds = {k: v for k, v in cmds.items() if k in keys}
         for cmd, argv in cmds.items():
             wrong, code, so, se = run(argv)
             ran += 1
@@ -115,8 +148,25 @@ def test_hostile_calibration_files(files, tmp_path):
                         wrong = f"{out.name} holds {bad}"
             if wrong:
                 failures[f"{name}: {cmd}"] = f"{wrong} | {se.strip()[-200:]}"
+        p.unlink()
     took = time.monotonic() - t0
     assert not failures, f"{len(failures)} failures of {ran} runs:\n" + "\n".join(
-        f"  {k}: {v}" for k, v in list(failures.items())[:60])
+        f"  {k}: {v}" for k, v in list(failures.items())[:80])
     assert loaded and refused, (len(loaded), len(refused))
     print(f"{len(cases)} mutants ({len(loaded)} load), {ran} command runs, {took:.1f} s")
+
+
+def test_hostile_calibration_files(files, tmp_path):
+    """Every mutant loads or is refused; a mutant of a coefficient that loads goes through
+    every command, one of a statistics record through the commands that print or copy the
+    records, a share of the refused through three commands; no command lets an exception out,
+    hangs, prints raw control characters or writes a file with NaN or infinity in it (or after
+    refusing)."""
+    _hostile_files(files, tmp_path, full=False)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600, method="thread")
+def test_hostile_calibration_files_every_command(files, tmp_path):
+    """The same with every loading mutant through every command, the session beside it."""
+    _hostile_files(files, tmp_path, full=True)
