@@ -75,7 +75,7 @@ def test_the_valid_file_passes_every_command(files, tmp_path):
 
 #: The commands every loading mutant of a statistics record meets (the rest of the commands
 #: read the coefficients, not the records; the slow run gives them every command).
-_STATS_CMDS = ("report", "export-c", "export-json")
+_STATS_CMDS = ("report", "export-json")
 #: The commands a refused mutant meets (each must refuse it, on the same load).
 _REFUSED_CMDS = ("report", "export-c", "send")
 #: Values of the coefficients whose mutants also meet ``report`` with the session beside the
@@ -94,15 +94,15 @@ def _plan(cases: dict[str, str], loaded: list[str], refused: list[str],
     if full:
         return [(n, None, True) for n in loaded] + [(n, _REFUSED_CMDS, True) for n in refused]
     plan: list[tuple[str, tuple[str, ...] | None, bool]] = []
-    for n in loaded:
+    for i, n in enumerate(loaded):
         if _in_stats(n):
-            plan.append((n, _STATS_CMDS, False))
+            plan.append((n, _STATS_CMDS if i % 2 else ("report",), False))
         else:
             plan.append((n, None, False))
             if n.startswith("impossible:") or n.split("=")[-1] in _WITH_DATA and any(
                     f"/{k}" in n for k in ("/offset", "/diag", "/offdiag", "/radius")):
                 plan.append((n, ("report",), True))
-    plan += [(n, _REFUSED_CMDS, False) for n in refused[::10]]
+    plan += [(n, _REFUSED_CMDS, False) for n in refused[::40]]
     return plan
 
 
@@ -114,6 +114,9 @@ def _hostile_files(files, tmp_path, full: bool) -> None:
             part["source"] = Path(part["source"]).name
     cases = mutants(doc)
     assert len(cases) > 300
+    if not full:  # a 300,000-number list takes 0.3 s to parse: a share of them by default
+        big = [n for n in cases if n.endswith("=enormous")]
+        cases = {n: t for n, t in cases.items() if n not in big or n in big[::6]}
     loaded, refused, failures = [], [], {}
     t0 = time.monotonic()
     alone = tmp_path / "alone"  # no session beside the file: report prints the stored stats
