@@ -449,6 +449,21 @@ def ferraris(
             f"rotations too small in {', '.join(small)}: each section must hold a full "
             f"{ang:g} deg turn about its axis"
         )
+    # A turn about axis i reads mostly on gyro axis i (one package's cross-axis terms are a few
+    # percent): a section without a turn (only the bias left after subtracting the static one)
+    # or with a turn about another axis gives columns that point elsewhere, and the inverse of
+    # their matrix is a finite but meaningless gain matrix. More than 0.71 of the column on its
+    # own axis (under 45 deg off it) can hold for one column of any direction only.
+    share = np.abs(np.diag(w)) / np.maximum(np.linalg.norm(w, axis=0), np.finfo(float).tiny)
+    off = [i for i in range(3) if not share[i] > 0.71]
+    if off:
+        raise CalibrationError(
+            "the turns in " + ", ".join(
+                f"{AXES[i]}_rot ({np.degrees(np.arccos(min(share[i], 1.0))):.0f} deg off its axis)"
+                for i in off)
+            + " do not read mostly on the gyro axis they are named after: each _rot section must "
+            f"hold one {ang:g} deg turn about its own axis (a section without a turn, or with a "
+            "turn about another axis, cannot give the gyro's gains)")
     sv = np.linalg.svd(w, compute_uv=False)
     _spans(sv, float(sv[0]), "the three turns")
     m_g = np.linalg.inv(g_mat) * (np.pi / 180)  # rad/s per raw
