@@ -103,3 +103,15 @@ def test_noise_rate_near_the_edge_of_a_double(tmp_path, rate):
     wrong, code, _, err = run(["noise", str(data), "--sensor", "gyro", "--rate-hz", rate])
     assert wrong is None and code == 1, (wrong, code, err)
     assert "--rate-hz" in err and "Hz" in err, err
+
+
+@pytest.mark.parametrize("speed", ["5e-324", "1e308"])
+def test_demo_speed_at_the_edges(tmp_path, speed):
+    """demo --speed 1e308 overflowed the simulated board's sample counter in its thread (a
+    traceback on the terminal) and 5e-324 blamed the board for sending nothing."""
+    wrong, code, _, err = run(["demo", "--speed", speed, "--out-dir", str(tmp_path),
+                               "--no-plot", "--quiet"], limit_s=30.0)
+    assert wrong is None and code == 1, (wrong, code, err)
+    assert "--speed" in err and "frames a second" in err, err
+    with pytest.raises(tc.CalibrationError, match="speed"):
+        sim.SimDevice(speed=float(speed))

@@ -73,6 +73,35 @@ def files(tmp_path_factory):
     return folder, data, cal, rest
 
 
+def _real_commands(realdata: Path, out: Path) -> dict[str, tuple[tuple[str, ...], list[str]]]:
+    """The method commands on the published recordings (as test_method_commands.py runs
+    them), and the commands that open a serial port (none here: exit 1 after the options)."""
+    x, g = realdata / "imutk-xsens", realdata / "freeimucal-gearvr"
+    return {
+        "turntable": (("turntable",), [
+            "turntable", str(g / "33RPMgyr.txt"), str(g / "45RPMgyr.txt"), "--rpm", "100/3",
+            "--rpm", "45", "--bias", str(g / "0RPMgyr.txt"), "--rate-hz", "100", "--rest", "10",
+            "--raw-unit", "rad/s", "-o", f"{out}.tt.json"]),
+        "ferraris": (("ferraris",), [
+            "ferraris", str(realdata / "imucal-ferraris" / "annotated_session.csv"),
+            "--rate-hz", "204.8", "-o", f"{out}.fer.json"]),
+        "imu": (("imu",), [
+            "imu", str(x / "xsens_acc.mat"), str(x / "xsens_gyro.mat"), "--time-column", "0",
+            "--accel-columns", "1,2,3", "--gyro-columns", "1,2,3", "--rate-hz", "100",
+            "--gravity", "9.81744", "-o", f"{out}.imu.json"]),
+        "board-read": (("board", "read"), ["board", "read", "--port", str(out.parent / "none"),
+                                           "-o", f"{out}.board.json"]),
+        "capture": (("capture",), ["capture", "--port", str(out.parent / "none"), "--protocol",
+                                   "framed", "-o", f"{out}.csv"]),
+    }
+
+
+#: Method commands of 0.9 to 5 s a run (ferraris, imu) and capture (which waits 1 s for its
+#: port): in the slow run only.
+REAL_FAST = ["turntable", "board-read"]
+REAL_SLOW = ["ferraris", "imu", "capture"]
+
+
 def _commands(files, out: Path) -> dict[str, tuple[tuple[str, ...], list[str]]]:
     """Command -> (its parser's path, a valid command line)."""
     folder, data, cal, rest = files
@@ -136,8 +165,9 @@ def _check(argv: list[str]) -> str | None:
     return None if wrong is None else f"{wrong} | {se.strip()[-200:]}"
 
 
-def _edges(name: str, files, tmp_path: Path, every: bool) -> None:
-    path, argv = _commands(files, tmp_path / "out")[name]
+def _edges(name: str, files, tmp_path: Path, every: bool, realdata: Path | None = None) -> None:
+    out = tmp_path / "out"
+    path, argv = (_real_commands(realdata, out) if realdata else _commands(files, out))[name]
     wrong = _check(argv)
     assert wrong is None, f"the valid command line fails: {wrong}"
     options = _options(path)
@@ -165,6 +195,19 @@ def test_every_option_at_its_edges(name, files, tmp_path):
 @pytest.mark.parametrize("name", sorted(HEAVY))
 def test_every_option_of_the_fitting_commands_at_every_edge(name, files, tmp_path):
     _edges(name, files, tmp_path, every=True)
+
+
+@pytest.mark.timeout(600, method="thread")
+@pytest.mark.parametrize("name", REAL_FAST)
+def test_every_option_of_the_method_and_port_commands(name, realdata, tmp_path):
+    _edges(name, None, tmp_path, every=True, realdata=realdata)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600, method="thread")
+@pytest.mark.parametrize("name", REAL_SLOW)
+def test_every_option_of_the_slow_method_and_port_commands(name, realdata, tmp_path):
+    _edges(name, None, tmp_path, every=True, realdata=realdata)
 
 
 def test_holdoff_near_the_edge_of_a_double_is_refused_by_name(files, tmp_path):
