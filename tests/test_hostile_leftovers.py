@@ -115,3 +115,36 @@ def test_demo_speed_at_the_edges(tmp_path, speed):
     assert "--speed" in err and "frames a second" in err, err
     with pytest.raises(tc.CalibrationError, match="speed"):
         sim.SimDevice(speed=float(speed))
+
+
+class _NoPool:
+    """Stands in for ProcessPoolExecutor: records how many workers were asked for and starts
+    none (a regression must not fork a hundred thousand interpreters on the test machine)."""
+
+    asked: list[int] = []
+
+    def __init__(self, max_workers: int) -> None:
+        _NoPool.asked.append(max_workers)
+        raise RuntimeError("no pool in this test")
+
+
+def test_batch_jobs_are_bounded_and_never_more_than_the_boards(tmp_path, monkeypatch):
+    """batch --jobs 100000 started a worker process per job (5,000 interpreters before it was
+    stopped, the machine's memory gone); jobs past MAX_JOBS are refused by name, and a pool
+    never has more workers than boards."""
+    from triaxcal.fleet import batch as fleet_batch
+
+    monkeypatch.setattr(fleet_batch, "ProcessPoolExecutor", _NoPool)
+    _NoPool.asked.clear()
+    data = tmp_path / "b.csv"
+    data.write_text("ax,ay,az\n1,0,0\n")
+    for jobs in (10**5, 0, -1, 2.5, "4"):
+        with pytest.raises(tc.CalibrationError, match="jobs must be a whole number in"):
+            fleet_batch.batch_fit([("a", data), ("b", data)], jobs=jobs)
+    with pytest.raises(RuntimeError, match="no pool"):
+        fleet_batch.batch_fit([("a", data), ("b", data)], jobs=fleet_batch.MAX_JOBS)
+    assert _NoPool.asked == [2]
+    wrong, code, _, err = run(["batch", str(data), "--jobs", "100000", "--out-dir",
+                               str(tmp_path / "out")])
+    assert wrong is None and code == 1 and "--jobs" in err, (wrong, code, err)
+    assert _NoPool.asked == [2]
