@@ -82,7 +82,7 @@ def encode_motioncal(
         *options.vector3(accel_offset, "accel_offset"),
         *options.vector3(gyro_offset, "gyro_offset"),
         *options.vector3(mag_offset, "mag_offset"),
-        options.number(field, "field", gt=0, hint="uT"),
+        options.number(field, "field", hint="uT"),
         si[0, 0], si[1, 1], si[2, 2], si[0, 1], si[0, 2], si[1, 2],
     ]
     if len(vals) != 16:
