@@ -16,12 +16,26 @@ runner are in _hostile_cli.py.
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import triaxcal as tc
-from _hostile_cli import SCALE, calibration, mutants, nonfinite_tokens, run, session
+import yaml
+from _hostile_cli import (
+    NUMBERS,
+    SCALE,
+    TEXTS,
+    calibration,
+    leaves,
+    mutants,
+    mutate,
+    nonfinite_tokens,
+    run,
+    session,
+)
 
 
 @pytest.fixture(scope="module")
@@ -173,3 +187,53 @@ def test_hostile_calibration_files(files, tmp_path):
 def test_hostile_calibration_files_every_command(files, tmp_path):
     """The same with every loading mutant through every command, the session beside it."""
     _hostile_files(files, tmp_path, full=True)
+
+
+def test_hostile_noise_files_for_the_kalibr_export(files, tmp_path):
+    """The noise file ``noise --format kalibr`` writes, with every value mutated (and files
+    that are not such a file at all), given to ``export --format kalibr --noise``: refused
+    with a message or exported with finite numbers only, never a traceback."""
+    folder, _, cal = files
+    rng = np.random.default_rng(3)
+    n = 3000
+    rest = tmp_path / "rest.csv"
+    np.savetxt(rest, np.column_stack([np.arange(n) / 100.0,
+                                      rng.normal(0, 20.0, (n, 3)) + [0, 0, 16384],
+                                      rng.normal(0, 2.0, (n, 3)) + [30, -12, 5]]),
+               delimiter=",", header="t,ax,ay,az,gx,gy,gz", comments="", fmt="%.6f")
+    noise = tmp_path / "noise.json"
+    wrong, code, _, se = run(["noise", str(rest), "--sensor", "both", "--cal", str(cal),
+                              "--format", "kalibr", "-o", str(noise)])
+    assert wrong is None and code == 0, (wrong, se)
+    doc = json.loads(noise.read_text())
+    cases = {"as-written": noise.read_text()}
+    for path, value in leaves(doc):
+        kinds = NUMBERS if isinstance(value, (int, float)) else TEXTS
+        for k, v in kinds.items():
+            cases[f"{'/'.join(map(str, path))}={k}"] = mutate(doc, path, v)
+    cases.update({"empty": "", "list": "[]", "null": "null", "nested": '{"a": {"b": 1}}',
+                  "calibration": cal.read_text(), "unknown-key": json.dumps({**doc, "x": 1}),
+                  "missing-key": json.dumps(dict(list(doc.items())[1:]))})
+    failures = {}
+    for name, text in cases.items():
+        bad = tmp_path / "bad.json"
+        bad.write_text(text, encoding="utf-8", errors="surrogatepass")
+        out = tmp_path / "k.yaml"
+        argv = ["export", str(cal), "--format", "kalibr", "--noise", str(bad), "-o", str(out),
+                "--counts-per-unit", SCALE, "--rate-hz", "100", "--kalibr-model", "calibrated"]
+        wrong, code, _, se = run(argv)
+        if wrong is None and out.exists():
+            if code != 0:
+                wrong = f"exit {code} but {out.name} was written"
+            else:
+                y = yaml.safe_load(out.read_text())
+                nums = [v for k, v in y.items() if "noise" in k or "walk" in k]
+                if not all(isinstance(v, float) and math.isfinite(v) and v > 0 for v in nums):
+                    wrong = f"noise values written: {nums}"
+            out.unlink()
+        if name == "as-written" and (wrong or code != 0):
+            wrong = f"the noise file as written is not exported (exit {code})"
+        if wrong:
+            failures[name] = f"{wrong} | {se.strip()[-200:]}"
+    assert not failures, f"{len(failures)} of {len(cases)}:\n" + "\n".join(
+        f"  {k}: {v}" for k, v in failures.items())
