@@ -515,6 +515,31 @@ def test_text_rejects_non_numbers():
     assert dec.stats.lines_skipped == 6
 
 
+def test_text_skips_readings_no_sensor_makes():
+    """A damaged line whose number is past any sensor's range (1e15) is skipped and counted like
+    a NaN: the pose detectors refuse such a reading, so it would end a capture."""
+    dec = TextDecoder(3)
+    data = (b"1,2,1e300\n1,2," + b"9" * 40 + b"\n1,-1e16,3\n1,2,1000000000000001\n"
+            b"1,2,-1e15\n4,5,1000000000000000\n")
+    assert dec.feed(data) == [(1, 2, -1e15), (4, 5, 10**15)]
+    assert dec.stats.lines_skipped == 4
+
+
+def test_a_damaged_huge_reading_does_not_end_a_live_capture(tmp_path):
+    from triaxcal.capture.run import channel_names
+    from triaxcal.io.serial import Record
+    from triaxcal.live import LiveState
+
+    names = channel_names("text", 9)
+    st = LiveState(tmp_path / "s.csv", names)
+    dec = TextDecoder(9)
+    good = b"0,0,16384,0,0,0,300,0,400\n"
+    rows = dec.feed(good * 60 + b"0,0,1e300,0,0,0,300,0,400\n" + good * 60)
+    assert dec.stats.lines_skipped == 1 and len(rows) == 120
+    st.on_records([Record(1.7e9 + 0.01 * i, r) for i, r in enumerate(rows)])
+    assert st.rows == 120
+
+
 def test_text_unknown_channels_skip_a_partial_first_line():
     dec = TextDecoder()
     out = dec.feed(b"2,3\n1,2,3\n4,5,6\n7,8\n") + dec.flush()

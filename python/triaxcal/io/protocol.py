@@ -39,6 +39,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Union
 
+from .._checks.options import MAGNITUDE
 from ..errors import CalibrationError
 from .framing import (
     _I16_MAX,
@@ -547,11 +548,17 @@ _SPLIT_RE = re.compile(r"\s*,\s*|[ \t]+", re.ASCII)
 
 
 def _parse_number(tok: str) -> Number | None:
+    """The number ``tok`` writes, or None when it is none, or not a reading: not finite, or
+    larger in size than any sensor reads (``MAGNITUDE``; the detectors and fits refuse such a
+    value, so one damaged line would end a capture). The line is then skipped and counted."""
     if _INT_RE.fullmatch(tok):
-        return int(tok)
+        if len(tok) > 20:  # past 1e15 whatever the digits; int() of a huge text is slow
+            return None
+        i = int(tok)
+        return i if abs(i) <= MAGNITUDE[1] else None
     if _FLOAT_RE.fullmatch(tok):
         f = float(tok)
-        return f if math.isfinite(f) else None
+        return f if math.isfinite(f) and abs(f) <= MAGNITUDE[1] else None
     return None
 
 
