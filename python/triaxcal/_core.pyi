@@ -21,6 +21,8 @@ __all__ = [
     "fit_batch",
     "apply",
     "AllanStream",
+    "read_ulog",
+    "read_dataflash",
 ]
 
 __version__: str
@@ -88,3 +90,6 @@ class AllanStream:
     @property
     def memory_bytes(self) -> int: ...
     def result(self) -> dict[str, Any]: ...
+
+def read_ulog(path: str, topics: list[str] | None = None) -> dict[str, Any]: ...
+def read_dataflash(path: str, types: list[str]) -> dict[str, Any]: ...
