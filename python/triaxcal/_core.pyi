@@ -82,7 +82,13 @@ def apply(
 @final
 class AllanStream:
     def __new__(
-        cls, rate_hz: float, axes: int, ms: list[int], *, exact_up_to: int | None
+        cls,
+        rate_hz: float,
+        axes: int,
+        ms: list[int],
+        *,
+        exact_up_to: int | None,
+        overlapping: bool = True,
     ) -> AllanStream: ...
     def push(self, chunk: npt.NDArray[np.float64]) -> None: ...
     @property
