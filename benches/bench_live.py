@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 import triaxcal as tc
-from triaxcal.io.capture import capture, channel_names
+from triaxcal.capture.run import capture, channel_names
 from triaxcal.io.serial import Record, SerialReader
 from triaxcal.live import LiveOptions, LiveState
 from triaxcal.live.quality import SpreadBuffer

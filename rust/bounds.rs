@@ -46,7 +46,7 @@ pub fn check_gains(eigenvalues: [f64; 3], model: &str) -> Result<(), CalError> {
                  cover only a band or a cap of the sphere"
             ),
             fix: "turn the sensor through more orientations (upside down and on each side), or \
-                  use a simpler model (\"sphere\")"
+                  use a simpler model (the sphere model)"
                 .into(),
         });
     }

@@ -38,6 +38,6 @@ esac
 
 cd "$work"
 python "$root/scripts/readme_quickstart.py"
-triaxcal demo --no-plot --out "$work/demo" --speed 40
+triaxcal demo --no-plot --out-dir "$work/demo" --speed 40
 test -s "$work/demo/calibration.json"
 echo "check_wheel: quick start and demo ran from the installed wheel"

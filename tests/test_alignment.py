@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 import triaxcal as tc
-from triaxcal.rotations import MOUNTINGS, mounting, nearest_mounting, rotation_angle_deg
+from triaxcal.conventions.rotations import MOUNTINGS, mounting, nearest_mounting, rotation_angle_deg
 
 # --------------------------------------------------------------------------------------------
 # the 24 right-angle rotations

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import triaxcal as tc
 import triaxcal.io.akm as akm
+from triaxcal.calibration.parts import fold_asa
 from triaxcal.cli import main
 from triaxcal.io.akm import apply_asa, asa_factors
-from triaxcal.parts import fold_asa
 
 ASA = (176, 177, 165)  # the fuse-ROM bytes of an AK8963: k = 1.1875, 1.1914, 1.1445
 
@@ -57,7 +57,7 @@ def test_asa_before_fitting_lets_the_sphere_model_fit(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fit", str(f), "--sensor", "mag", "--model", "sphere", "--radius", "50uT",
                  "--asa", ",".join(map(str, ASA)), "--sigma", "0", "-o", str(out)]) == 0
-    assert main(["report", str(out), "--json", str(tmp_path / "r.json")]) == 0
+    assert main(["report", str(out), "-o", str(tmp_path / "r.json")]) == 0
     import json
 
     rep = json.loads((tmp_path / "r.json").read_text())["mag"]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from triaxcal.errors import CalibrationError
-from triaxcal.fleet.autocal import StillWindows, fit_still_windows
+from triaxcal.methods.autocal import StillWindows, fit_still_windows
 from triaxcal.sim import FreeLivingSim
 
 
@@ -110,7 +110,7 @@ def test_conventions_ggir_and_calibration_file():
     g = cal.ggir
     ggir_form = (y + g["offset"]) * g["scale"] + (t[:, None] - g["meantemp"]) * g["tempoffset"]
     assert np.allclose(cal.apply(y, t), ggir_form, atol=1e-12)
-    part = cal.to_sensor_calibration()
+    part = tc.calibration.parts.part_from_autocal(cal)
     assert np.allclose(part.apply(y, temperature=t), cal.apply(y, t), atol=1e-12)
     assert part.raw_unit == part.unit == "g" and part.model == "autocal-vanhees"
     back = tc.Calibration.from_json(tc.Calibration(accel=part).to_json()).accel

@@ -9,14 +9,15 @@ from collections import Counter
 import numpy as np
 import pytest
 from _boards import FAULTS, WINDOW, make_board, production_run, write_session
-from triaxcal import Calibration
+from triaxcal import Calibration, PoseSettings
+from triaxcal.calibration.request import SourceOptions
 from triaxcal.cli import main
 from triaxcal.errors import CalibrationError
 from triaxcal.fleet.batch import (
     SUMMARY_COLUMNS,
     Limits,
     batch_fit,
-    fit_options,
+    batch_request,
     read_grouped_table,
 )
 
@@ -30,7 +31,7 @@ def summary(path):
 def test_thousand_boards_fifty_bad_every_fault_named(tmp_path, capsys):
     faults = production_run(tmp_path / "sessions", n=1000, n_bad=50)
     assert sum(f is not None for f in faults.values()) == 50
-    rc = main(["batch", str(tmp_path / "sessions"), "-o", str(tmp_path / "out"),
+    rc = main(["batch", str(tmp_path / "sessions"), "--out-dir", str(tmp_path / "out"),
                "--window", str(WINDOW), "--jobs", "2"])
     assert rc == 1  # some boards fail
     rows = {r["id"]: r for r in summary(tmp_path / "out" / "summary.csv")}
@@ -66,7 +67,7 @@ def test_batch_equals_fitting_each_session_alone(tmp_path):
     folder.mkdir()
     for i, fault in enumerate([None, None, "offset", "cross_axis"]):
         write_session(folder / f"B{i}.csv", 1.7e9, make_board(40 + i, fault)[0])
-    assert main(["batch", str(folder), "-o", str(tmp_path / "out"), "--window",
+    assert main(["batch", str(folder), "--out-dir", str(tmp_path / "out"), "--window",
                  str(WINDOW), "--jobs", "2", "--quiet"]) == 1
     for i in range(4):
         alone = tmp_path / f"alone{i}.json"
@@ -96,7 +97,7 @@ def test_one_table_of_many_boards_csv_and_parquet(tmp_path):
                   enumerate(counts.tolist())]
     table = tmp_path / "fleet.csv"
     table.write_text("\n".join(lines) + "\n")
-    rc = main(["batch", str(table), "--by", "device_id", "-o", str(tmp_path / "o1"),
+    rc = main(["batch", str(table), "--by", "device_id", "--out-dir", str(tmp_path / "o1"),
                "--window", str(WINDOW), "--quiet", "--jobs", "1"])
     assert rc == 1
     rows = {r["id"]: r for r in summary(tmp_path / "o1" / "summary.csv")}
@@ -109,7 +110,7 @@ def test_one_table_of_many_boards_csv_and_parquet(tmp_path):
     cols = {n: [row[k] for row in data] for k, n in enumerate(["device_id", "t", "ax", "ay",
                                                                  "az"])}
     pq.write_table(pa.table(cols), tmp_path / "fleet.parquet")
-    rc = main(["batch", str(tmp_path / "fleet.parquet"), "--by", "device_id", "-o",
+    rc = main(["batch", str(tmp_path / "fleet.parquet"), "--by", "device_id", "--out-dir",
                str(tmp_path / "o2"), "--window", str(WINDOW), "--quiet", "--jobs", "1"])
     assert rc == 1
     a = Calibration.load(tmp_path / "o1" / "dev-0" / "calibration.json").accel
@@ -121,12 +122,12 @@ def test_limits_are_configurable(tmp_path):
     folder = tmp_path / "s"
     folder.mkdir()
     write_session(folder / "X.csv", 1.7e9, make_board(90, "offset")[0])
-    assert main(["batch", str(folder), "-o", str(tmp_path / "a"), "--window", str(WINDOW),
+    assert main(["batch", str(folder), "--out-dir", str(tmp_path / "a"), "--window", str(WINDOW),
                  "--quiet"]) == 1
-    assert main(["batch", str(folder), "-o", str(tmp_path / "b"), "--window", str(WINDOW),
+    assert main(["batch", str(folder), "--out-dir", str(tmp_path / "b"), "--window", str(WINDOW),
                  "--quiet", "--limit", "offset_max=0.3"]) == 0
     (tmp_path / "lim.json").write_text(json.dumps({"offset_max": 0.3, "noise_max": 0.0001}))
-    assert main(["batch", str(folder), "-o", str(tmp_path / "c"), "--window", str(WINDOW),
+    assert main(["batch", str(folder), "--out-dir", str(tmp_path / "c"), "--window", str(WINDOW),
                  "--quiet", "--limits", str(tmp_path / "lim.json")]) == 1
     assert summary(tmp_path / "c" / "summary.csv")[0]["reasons"] == "noise"
     assert (tmp_path / "b" / "X" / "triaxcal_calibration.h").exists()
@@ -139,7 +140,7 @@ def test_hostile_inputs(tmp_path, capsys):
     (folder / "empty.csv").write_text("")
     (folder / "words.csv").write_text("t,ax,ay,az\n1,a,b,c\n")
     write_session(folder / "good.csv", 1.7e9, make_board(3)[0])
-    rc = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--window", str(WINDOW),
+    rc = main(["batch", str(folder), "--out-dir", str(tmp_path / "o"), "--window", str(WINDOW),
                "--quiet", "--jobs", "1"])
     assert rc == 1
     rows = {r["id"]: r for r in summary(tmp_path / "o" / "summary.csv")}
@@ -150,9 +151,9 @@ def test_hostile_inputs(tmp_path, capsys):
     raw = (tmp_path / "o" / "summary.csv").read_text()
     assert "\n=" not in raw and ",=" not in raw
     for bad in (["--limit", "nope=1"], ["--limit", "offset_max=x"], ["--limit", "offset_max=-1"]):
-        assert main(["batch", str(folder), "-o", str(tmp_path / "o"), "--quiet", *bad]) == 1
+        assert main(["batch", str(folder), "--out-dir", str(tmp_path / "o"), "--quiet", *bad]) == 1
         assert "limit" in capsys.readouterr().err
-    assert main(["batch", str(tmp_path / "nothing"), "-o", str(tmp_path / "o")]) == 1
+    assert main(["batch", str(tmp_path / "nothing"), "--out-dir", str(tmp_path / "o")]) == 1
     with pytest.raises(CalibrationError, match="no column"):
         read_grouped_table(folder / "good.csv", "device_id")
 
@@ -163,7 +164,24 @@ def test_library_call_in_process():
 
     t = Table(names=("ax", "ay", "az"), data=counts.astype(float), path=__import__(
         "pathlib").Path("mem"), sha256="0" * 64)
-    res = batch_fit([("a", t)], args=fit_options(window=WINDOW), limits=Limits(), jobs=1)
+    req = batch_request(source=SourceOptions(poses=True, detection=PoseSettings(window=WINDOW)))
+    res = batch_fit([("a", t)], request=req, limits=Limits(), jobs=1)
     assert res[0].passed and res[0].part is not None and res[0].outputs == ()
     with pytest.raises(CalibrationError):
         Limits(offset_max=float("nan"))
+
+
+def test_grouped_table_keeps_ids_apart_and_reads_numbers_as_the_table_reader(tmp_path):
+    """Ids that differ only by spaces are other boards; a value read_table refuses (nan,
+    1_000) is refused here too; a --limits path that is not a regular file is refused."""
+    from triaxcal.fleet.batch import load_limits, read_grouped_table
+
+    p = tmp_path / "g.csv"
+    p.write_text("id,x,y,z\nB1,1,2,3\nB1 ,4,5,6\n")
+    assert [i for i, _ in read_grouped_table(p, "id")] == ["B1", "B1 "]
+    for bad in ("nan", "1_000", "inf"):
+        p.write_text(f"id,x,y,z\nB1,1,2,{bad}\n")
+        with pytest.raises(CalibrationError, match="line 2"):
+            read_grouped_table(p, "id")
+    with pytest.raises(CalibrationError, match="not a regular file|device"):
+        load_limits("/dev/zero")

@@ -19,7 +19,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from triaxcal import CalibrationError
+from triaxcal.capture.run import read_session
 from triaxcal.cli import main
+from triaxcal.detect.session import POSE_N_COLUMN
 from triaxcal.io.board_poses import (
     MODE_BYTE,
     BoardPoseDecoder,
@@ -29,9 +31,7 @@ from triaxcal.io.board_poses import (
     encode_settings_frame,
     encode_status_frame,
 )
-from triaxcal.io.capture import read_session
 from triaxcal.io.protocol import FramedDecoder, crc16_ccitt, encode_framed
-from triaxcal.poses import POSE_N_COLUMN
 
 K = 7
 
@@ -264,7 +264,7 @@ def test_capture_board_poses_then_fit(tmp_path, capsys):
     try:
         rc = main(["capture", "--port", board.port, "--protocol", "framed", "--board-poses",
                    "--holdoff", "2", "--gyro-threshold", "off", "--poses", "26",
-                   "--seconds", "30", "--out", str(out), "--quiet"])
+                   "--seconds", "30", "-o", str(out), "--quiet"])
     finally:
         board.close()
     assert rc == 0, capsys.readouterr().err
@@ -314,7 +314,7 @@ def test_capture_warns_when_the_board_keeps_other_settings(tmp_path, capsys):
     try:
         rc = main(["capture", "--port", board.port, "--protocol", "framed", "--board-poses",
                    "--window", "10", "--poses", "3", "--seconds", "30",
-                   "--out", str(tmp_path / "s.csv")])
+                   "-o", str(tmp_path / "s.csv")])
     finally:
         board.close()
     assert rc == 0
@@ -333,7 +333,7 @@ def test_capture_warns_when_the_board_keeps_other_settings(tmp_path, capsys):
 ])
 def test_board_poses_options_are_checked(argv, match, tmp_path, capsys):
     rc = main(["capture", "--port", str(tmp_path / "nope"), *argv,
-               "--out", str(tmp_path / "s.csv")])
+               "-o", str(tmp_path / "s.csv")])
     assert rc != 0
     assert match in capsys.readouterr().err
     assert not (tmp_path / "s.csv").exists()

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from triaxcal.cli import main
+from triaxcal.conventions.rotations import mounting
 from triaxcal.io.protocol import CHANNELS_10
-from triaxcal.rotations import mounting
 
 pytest.importorskip("wmm", reason="the geo extra (wmm-calculator)")
 
@@ -76,7 +76,7 @@ def test_magnetised_environment_is_warned(tmp_path, wmm, capsys):
     (["--location", "91,0"], "latitude"),
     (["--location", "47,8", "--date", "2012-01-01"], "2024-11-13 to 2029-12-31"),
     (["--location", "47,8", "--sensor", "accel"], "applies to --sensor mag"),
-    (["--yaw-only", "--sensor", "accel"], "apply to --sensor mag"),
+    (["--yaw-only", "--sensor", "accel"], "applies to --sensor mag"),
 ])
 def test_bad_field_options(tmp_path, wmm, capsys, extra, match):
     s = tmp_path / "s.csv"
@@ -110,8 +110,9 @@ def test_align_finds_the_mounting_and_is_stored(tmp_path, wmm, capsys):
     assert "alignment       into the accel frame" in rep and "heading check" in rep
     # the parameter files carry it
     parm = tmp_path / "cal.parm"
-    assert main(["export", str(cal), "--format", "px4", "--sensors", "mag", "-o",
-                 str(tmp_path / "p.params")]) == 0
+    assert main(["export", str(cal), "--format", "px4", "--sensors", "mag",
+                 "--counts-per-unit", "mag=10:uT",  # the simulator's scale
+                 "-o", str(tmp_path / "p.params")]) == 0
     assert "CAL_MAG0_ROT\t6\t6" in (tmp_path / "p.params").read_text()
     del parm
 
@@ -129,7 +130,16 @@ def test_yaw_only_on_the_nliaudat_recording(realdata, tmp_path, capsys):
     rep = capsys.readouterr().out
     assert "yaw-only calibration" in rep and "limit:" in rep
     assert "sphere is empty" not in rep  # a band of the sphere is what turns give
-    # with any location on Earth, 187 "uT" of horizontal field is far too much
-    assert main(["fit", str(src), "--sensor", "mag", "--raw-unit", "uT", "--yaw-only",
-                 "--location", LOC, "--date", DATE, "-o", str(tmp_path / "y2.json")]) == 0
+    # with any location on Earth, 187 "uT" of horizontal field is far too much: readings that
+    # claim to be uT but need gains of 0.11 are refused by the validity gate ...
+    args = ["fit", str(src), "--sensor", "mag", "--raw-unit", "uT", "--yaw-only",
+            "--location", LOC, "--date", DATE, "-o", str(tmp_path / "y2.json")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "not written" in err and "gains should lie near 1" in err
+    assert not (tmp_path / "y2.json").exists()
+    # ... and written with --force, marked not valid, the strength warning kept
+    assert main([*args, "--force"]) == 0
     assert "horizontal field strength the readings show" in capsys.readouterr().out
+    forced = tc.Calibration.load(tmp_path / "y2.json").mag
+    assert forced.valid is False and any("gains" in r for r in forced.invalid_reasons)

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import triaxcal as tc
 from triaxcal import sim
+from triaxcal.capture.run import SessionWriteError, SessionWriter, read_session
 from triaxcal.cli import main
-from triaxcal.io.capture import SessionWriteError, SessionWriter, read_session
 from triaxcal.io.serial import Record
 from triaxcal.io.tables import read_table
 
@@ -79,7 +79,9 @@ def test_fit_and_export_to_a_full_device(tmp_path, capsys):
     cal = tmp_path / "c.json"
     assert main(["fit", str(sess), "--poses", "-o", str(cal)]) == 0
     for fmt in ("c", "c-fixed", "json", "motioncal"):
-        assert main(["export", str(cal), "--format", fmt, "-o", "/dev/full"]) == 1
+        scale = ["--counts-per-unit", "accel=16384:g", "--offsets-only"] \
+            if fmt == "motioncal" else []
+        assert main(["export", str(cal), "--format", fmt, "-o", "/dev/full", *scale]) == 1
         assert "no space left" in capsys.readouterr().err
     assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
 
@@ -95,7 +97,7 @@ def test_export_and_report_paths(tmp_path, capsys):
         (["export", str(tmp_path), "--format", "c", "-o", str(tmp_path / "x.h")],
          "is a folder"),
         (["report", str(tmp_path)], "is a folder"),
-        (["report", str(cal), "--json", str(tmp_path / "no" / "r.json")], "does not exist"),
+        (["report", str(cal), "-o", str(tmp_path / "no" / "r.json")], "does not exist"),
         (["report", str(cal), "--plot", str(tmp_path / "no" / "r.png")], "does not exist"),
     ]
     for argv, words in cases:
@@ -146,7 +148,7 @@ def _device(speed: float = 20.0) -> sim.SimDevice:
 def test_capture_to_dev_full(capsys):
     with _device() as dev:
         rc = main(["capture", "--port", dev.port, "--protocol", "framed", "--samples", "50",
-                   "--out", "/dev/full", "--quiet", "--no-bell"])
+                   "-o", "/dev/full", "--quiet", "--no-bell"])
     err = capsys.readouterr().err
     _no_traceback(err)
     assert rc == 1 and "no space left" in err and "nothing was captured" in err
@@ -157,7 +159,7 @@ def test_capture_to_dev_full(capsys):
 def test_capture_into_proc(capsys):
     with _device() as dev:
         rc = main(["capture", "--port", dev.port, "--protocol", "framed", "--samples", "50",
-                   "--out", "/proc/x.csv", "--quiet", "--no-bell"])
+                   "-o", "/proc/x.csv", "--quiet", "--no-bell"])
     err = capsys.readouterr().err
     _no_traceback(err)
     assert rc == 1 and "cannot write /proc/x.csv" in err
@@ -173,7 +175,7 @@ CHILD = textwrap.dedent("""
     resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
     from triaxcal.cli import main
     sys.exit(main(["capture", "--port", sys.argv[1], "--protocol", "framed", "--samples",
-                   "100000", "--out", sys.argv[2], "--no-bell", "--quiet"]))
+                   "100000", "-o", sys.argv[2], "--no-bell", "--quiet"]))
 """)
 
 

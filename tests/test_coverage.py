@@ -1,14 +1,16 @@
-"""The one coverage measure: equal-area cells of the sphere (triaxcal.coverage)."""
+"""The one coverage measure: equal-area cells of the sphere (triaxcal.quality.coverage)."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+import triaxcal
 import triaxcal as tc
-from triaxcal.coverage import (
-    LOW_COVERAGE_PCT,
+from triaxcal.quality.bounds import LOW_COVERAGE_PCT
+from triaxcal.quality.coverage import (
     N_CELLS,
     coverage,
     coverage_warning,
@@ -120,11 +122,18 @@ def test_suggestions_aim_at_empty_cells():
     assert coverage(pts).percent == 100.0 and len(pts) == N_CELLS
 
 
-def test_capture_and_report_use_the_same_measure():
-    from triaxcal.io import capture as cap
-    from triaxcal.report import coverage as report_coverage
+def test_one_coverage_measure_in_the_package():
+    """Capture's status line, the fit, the report, batch and the live page all call
+    triaxcal.quality.coverage.coverage: no module defines another function of that name."""
+    import ast
 
-    pts = _uniform(50, seed=4)
-    counts, pct = report_coverage(pts)
-    assert counts.shape == (N_CELLS,) and pct == coverage(pts).percent
-    assert cap.coverage(pts) == coverage(pts).fraction
+    pkg = Path(triaxcal.__file__).parent
+    defs = []
+    for path in pkg.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and "coverage" in (
+                    node.name.strip("_")):
+                if node.name.strip("_") == "coverage":
+                    defs.append(f"{path.relative_to(pkg)}:{node.name}")
+    assert defs == ["quality/coverage.py:coverage"]
+

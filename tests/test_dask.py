@@ -49,6 +49,7 @@ def same(a, b) -> None:
             assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), k
 
 
+@pytest.mark.slow
 def test_fit_batch_on_two_worker_processes_equals_in_process(client):
     assert len(client.scheduler_info()["workers"]) == 2
     raw = fleet(40, 250)
@@ -67,6 +68,7 @@ def test_fit_batch_on_two_worker_processes_equals_in_process(client):
     same(lazy.compute(), want)
 
 
+@pytest.mark.slow
 def test_fit_groups_from_parquet_equals_in_process(client, tmp_path):
     import triaxcal.dask as tcd
 

@@ -8,15 +8,15 @@ import time
 import numpy as np
 import pytest
 from triaxcal import sim
+from triaxcal.capture.run import read_session
 from triaxcal.cli import main
-from triaxcal.io.capture import read_session
 
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     t0 = time.monotonic()
-    rc = main(["demo", "--out", str(out), "--quiet"])
+    rc = main(["demo", "--out-dir", str(out), "--quiet"])
     elapsed = time.monotonic() - t0
     return rc, out, json.loads((out / "results.json").read_text()), elapsed
 
@@ -86,7 +86,7 @@ def test_demo_writes_calibration_headers_and_report(demo):
 
 
 def test_demo_prints_a_table_with_units(tmp_path, capsys):
-    rc = main(["demo", "--out", str(tmp_path), "--quiet", "--protocol", "binary", "--seed", "2",
+    rc = main(["demo", "--out-dir", str(tmp_path), "--quiet", "--protocol", "binary", "--seed", "2",
                "--speed", "60"])
     assert rc == 0
     text = capsys.readouterr().out
@@ -97,15 +97,15 @@ def test_demo_prints_a_table_with_units(tmp_path, capsys):
     assert res["protocol"] == "binary" and res["ok"]
 
 
-def test_readme_capture_example_runs(tmp_path, monkeypatch):
+def test_capture_page_simulator_example_runs(tmp_path, monkeypatch):
     import re
 
-    from conftest import readme_section
+    from conftest import doc_page
 
-    code = re.findall(r"```python\n(.*?)```", readme_section("Capture"), re.S)[0]
+    code = re.findall(r"```python\n(.*?)```", doc_page("guide/capture.md"), re.S)[0]
     monkeypatch.chdir(tmp_path)
     env: dict = {}
-    exec(compile(code, "README.md", "exec"), env)
+    exec(compile(code, "docs/guide/capture.md", "exec"), env)
     assert env["result"].stopped_by == "poses" and len(env["result"].poses) == 10
     assert abs(np.linalg.norm(env["g"], axis=1).mean() - 1.0) < 1e-3
     assert (tmp_path / "session.csv").read_text().startswith("t,ax,ay,az,")
@@ -119,11 +119,16 @@ def test_capture_and_demo_count_the_84_poses_and_cover_the_sphere(demo):
     assert res["capture"]["poses_online"] == res["poses"] == 84
     assert res["capture"]["coverage_pct"] == res["coverage_pct"] == 100.0
     # the demo detected with nothing but the command line's defaults
-    from triaxcal.session.pose_options import default_settings
+    import argparse
 
+    from triaxcal.cli._pose_options import add_pose_options, settings_from_args
+
+    p = argparse.ArgumentParser()
+    add_pose_options(p)
+    defaults = settings_from_args(p.parse_args([]))
     d = res["pose_detection"]
     assert {k: v for k, v in d.items() if k != "counts_per_g"} == {
-        k: v for k, v in default_settings().to_dict().items() if k != "counts_per_g"}
+        k: v for k, v in defaults.to_dict().items() if k != "counts_per_g"}
     assert set(res["thresholds"]) == {"accel", "gyro", "mag"}
 
 
@@ -157,14 +162,14 @@ def test_fit_and_report_find_the_same_poses_and_coverage(demo, tmp_path, capsys)
     # report on the fit's calibration file, and on the demo's own: 84 readings, same coverage
     for path in (cal, out / "calibration.json"):
         jpath = tmp_path / f"{path.stem}-report.json"
-        assert main(["report", str(path), "--json", str(jpath)]) == 0
+        assert main(["report", str(path), "-o", str(jpath)]) == 0
         rep = json.loads(jpath.read_text())
         assert rep["accel"]["n"] == 84 and rep["accel"]["coverage_pct"] == 100.0
         assert rep["mag"]["n"] == 84
         assert rep["mag"]["coverage_pct"] == fitted.mag.stats["coverage_pct"]
     # and `report SESSION --poses` fits and reports the same 84
     jpath = tmp_path / "session-report.json"
-    assert main(["report", str(session), "--poses", "--json", str(jpath)]) == 0
+    assert main(["report", str(session), "--poses", "-o", str(jpath)]) == 0
     rep = json.loads(jpath.read_text())["accel"]
     assert rep["n"] == 84 and rep["coverage_pct"] == 100.0
 
@@ -172,8 +177,8 @@ def test_fit_and_report_find_the_same_poses_and_coverage(demo, tmp_path, capsys)
 def test_demo_takes_the_pose_options_of_the_command_line(tmp_path):
     # the seed's rule alone (no gyro, no magnetometer) merges the twists at the poles, in the
     # capture and in the detection on the saved session alike
-    rc = main(["demo", "--out", str(tmp_path), "--quiet", "--no-plot", "--gyro-threshold", "off",
-               "--mag-threshold", "off"])
+    rc = main(["demo", "--out-dir", str(tmp_path), "--quiet", "--no-plot", "--gyro-threshold",
+               "off", "--mag-threshold", "off"])
     assert rc == 0
     res = json.loads((tmp_path / "results.json").read_text())
     assert res["poses"] == res["capture"]["poses_online"] < 70

@@ -18,7 +18,7 @@ from triaxcal.sim import SimIMU, globe_script
 @pytest.fixture(scope="module")
 def demo_cal(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
-    assert main(["demo", "--out", str(out), "--quiet", "--no-plot"]) == 0
+    assert main(["demo", "--out-dir", str(out), "--quiet", "--no-plot"]) == 0
     return out / "calibration.json"
 
 
@@ -55,7 +55,7 @@ def test_a_second_session_of_the_same_board_is_the_same_within_uncertainty(
     second = tmp_path / "second.json"
     session_cal(SimIMU(1), second, sessions=2)  # the 2nd recording: new noise, same board
     rc = main(["diff", str(demo_cal), str(second), "--sensor", "accel", "--sensor", "mag",
-               "--json"])
+               "--format", "json"])
     d = json.loads(capsys.readouterr().out)
     assert rc == 0, d
     for s in ("accel", "mag"):
@@ -72,7 +72,7 @@ def test_a_board_whose_offset_changed_is_flagged(demo_cal, tmp_path, capsys):
                                          offset=imu.truth.accel.offset + [300.0, 0.0, 0.0]))
     path = tmp_path / "moved.json"
     session_cal(moved, path, sessions=2)
-    rc = main(["diff", str(demo_cal), str(path), "--sensor", "accel", "--json"])
+    rc = main(["diff", str(demo_cal), str(path), "--sensor", "accel", "--format", "json"])
     d = json.loads(capsys.readouterr().out)
     assert rc == 3 and d["verdict"] == "changed"
     coefs = d["parts"]["accel"]["coefficients"]

@@ -283,6 +283,10 @@ def test_packet_decoder_checks_crc_and_header():
         decode_motioncal(bad + struct.pack("<H", crc16_modbus(bad)))
 
 
+#: The board driver's scale of these tests' parts in counts (given: no export assumes one).
+DRIVER = {"accel": (16384, "g"), "gyro": (131, "deg/s"), "mag": (10, "uT")}
+
+
 def test_packet_from_calibration_units(cal):
     sym_mag = tc.SensorCalibration(
         offset=[100.0, -50.0, 20.0], matrix=np.array([[0.11, 0.002, 0], [0.002, 0.1, 0],
@@ -290,13 +294,14 @@ def test_packet_from_calibration_units(cal):
         unit="uT", radius=48.0,
     )
     c = cal.replace(mag=sym_mag)
-    lost = tc.export.motioncal_losses(c)
+    lost = tc.export.motioncal_losses(c, counts_per_unit=DRIVER)
     assert any(m.startswith("accelerometer: gains") for m in lost)
     assert any(m.startswith("gyro: temperature terms") for m in lost) == (
         c.gyro.temperature is not None)
     with pytest.raises(tc.CalibrationError, match="cannot carry all"):
-        motioncal_packet(c)  # the accelerometer's gains would be lost unnoticed
-    p = decode_motioncal(motioncal_packet(c, offsets_only=True))
+        # the accelerometer's gains would be lost unnoticed
+        motioncal_packet(c, counts_per_unit=DRIVER)
+    p = decode_motioncal(motioncal_packet(c, offsets_only=True, counts_per_unit=DRIVER))
     # accel: counts / 16384 * 9.80665 m/s^2; gyro: counts / 131 deg/s in rad/s; mag: counts / 10
     np.testing.assert_allclose(p.accel_offset, c.accel.offset / 16384 * 9.80665, rtol=1e-6)
     np.testing.assert_allclose(p.gyro_offset, np.radians(c.gyro.offset / 131), rtol=1e-6)
@@ -309,7 +314,8 @@ def test_packet_from_calibration_units(cal):
     theirs = np.array(p.soft_iron) @ (raw / 10 - np.array(p.mag_offset))
     np.testing.assert_allclose(theirs, mine, rtol=1e-5)
     with pytest.raises(tc.CalibrationError, match="symmetric"):
-        motioncal_packet(cal, offsets_only=True)  # the fixture's mag matrix is not symmetric
+        # the fixture's mag matrix is not symmetric
+        motioncal_packet(cal, offsets_only=True, counts_per_unit=DRIVER)
 
 
 def test_packet_of_offsets_only_loses_nothing():
@@ -319,8 +325,9 @@ def test_packet_of_offsets_only_loses_nothing():
         accel=tc.SensorCalibration(offset=[12, -3, 40], matrix=np.eye(3) / 16384, unit="g"),
         mag=tc.SensorCalibration(offset=[100, -50, 20], matrix=np.eye(3) * 0.1, unit="uT",
                                  radius=48.0))
-    assert tc.export.motioncal_losses(c) == []
-    assert decode_motioncal(motioncal_packet(c)).field == pytest.approx(48.0)
+    assert tc.export.motioncal_losses(c, counts_per_unit=DRIVER) == []
+    pkt = decode_motioncal(motioncal_packet(c, counts_per_unit=DRIVER))
+    assert pkt.field == pytest.approx(48.0)
 
 
 def test_parse_echo_amid_binary_noise():

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 import triaxcal as tc
-from triaxcal import field as fieldmod
+from triaxcal.methods import field as fieldmod
 
 # The test-value table of the WMM2025 Technical Report (NOAA NCEI / BGS, December 2024):
 # decimal year, height above the WGS 84 ellipsoid (km), geodetic latitude and longitude (deg),

@@ -28,9 +28,10 @@ import numpy as np
 import pytest
 import serial
 import triaxcal
+from triaxcal.capture.run import capture, read_session
 from triaxcal.cli import main
+from triaxcal.detect.session import POSE_N_COLUMN
 from triaxcal.io.board_poses import BoardPoseDecoder, BoardPoseSettings
-from triaxcal.io.capture import capture, read_session
 from triaxcal.io.motioncal import encode_motioncal, parse_motioncal_echo
 from triaxcal.io.protocol import (
     BinaryDecoder,
@@ -39,7 +40,6 @@ from triaxcal.io.protocol import (
     TextDecoder,
 )
 from triaxcal.io.serial import SerialReader
-from triaxcal.poses import POSE_N_COLUMN
 
 pytestmark = pytest.mark.qemu
 

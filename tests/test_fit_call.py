@@ -16,7 +16,7 @@ import pytest
 import triaxcal as tc
 from _synth import distorted_sphere
 from triaxcal import _core
-from triaxcal.fit import PARAM_NAMES, EllipsoidFit, _check_options
+from triaxcal.fit.ellipsoid import PARAM_NAMES, EllipsoidFit, _check_options
 
 MATRIX = np.array([[1.04, 0.01, -0.02], [0.01, 0.97, 0.015], [-0.02, 0.015, 1.01]]) / 16384
 RAW, _ = distorted_sphere(60, offset=[300.0, -120.0, 80.0], matrix=MATRIX, noise=0.01, seed=11)

@@ -11,7 +11,7 @@ import triaxcal as tc
 from _synth import distorted_sphere
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from triaxcal.select import fit_auto, fit_robust, information_criterion
+from triaxcal.fit.select import fit_auto, fit_robust, information_criterion
 
 OFFSET = np.array([412.0, -230.5, 97.25])  # counts
 MATRIX = np.array([[1.05, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 1.01]]) / 16384.0
@@ -133,7 +133,7 @@ def test_unaligned_arrays_are_accepted_by_every_fit():
 
 def test_aligned_contiguous_float64_is_not_copied():
     raw, _ = distorted_sphere(100, offset=OFFSET, matrix=MATRIX, seed=1)
-    from triaxcal._validate import as_points
+    from triaxcal._checks.arrays import as_points
 
     assert as_points(raw) is raw
     assert as_points(_unaligned(raw)).flags.aligned

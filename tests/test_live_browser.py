@@ -26,13 +26,12 @@ from typing import Any
 import numpy as np
 import pytest
 from triaxcal.calibration import Calibration
+from triaxcal.capture.run import capture, channel_names
 from triaxcal.cli import main
-from triaxcal.cli.demo import tumble_script
-from triaxcal.io.capture import capture, channel_names
 from triaxcal.io.serial import SerialReader
 from triaxcal.live import LiveOptions, LiveState
 from triaxcal.live.server import LiveServer
-from triaxcal.sim import SimDevice, SimIMU, globe_script
+from triaxcal.sim import SimDevice, SimIMU, globe_script, tumble_script
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,37 +11,67 @@ import triaxcal as tc
 from _realdata import load_ferraris_annotated, load_ferraris_session
 from triaxcal.sim import SimIMU, six_face_script
 
-# The seed's published coefficients (tilt-rig-gravity-calibration.txt) and its formula
-# a = g * (s + o), and the 24 norms it printed as its sanity check.
+# The tilt-rig seed write-up (tilt-rig-gravity-calibration.txt): its published coefficients and
+# formula a = g * (s + o), its twelve real samples (raw temperature, temperature in degC,
+# accelerometer x y z in g, gyro x y z) at 10 degree tilts fore down (FD), aft down (AD), left
+# down (LD) and right down (RD), and the 24 norms it printed as its sanity check, as printed.
 SEED_OFFSET = np.array([0.007894833, 0.009969, 0.000359667])
 SEED_GAIN = np.array([1.28560825, 1.333382476, 0.936797208])
+SEED_SAMPLES = """
+FD
+-4011, 24.732941, -0.142926, 0.012745, 1.050931, -0.053121, 0.025203, -0.000613
+-4003, 24.756471, -0.142944, 0.012847, 1.050797, -0.053175, 0.025116, -0.000586
+-4007, 24.744706, -0.143027, 0.012854, 1.050942, -0.053439, 0.025573, -0.000224
+AD
+-4269, 23.974118, 0.158685, 0.007537, 1.050188, -0.051737, 0.025540, -0.000832
+-4280, 23.941765, 0.158802, 0.007494, 1.050043, -0.051684, 0.025404, -0.000848
+-4269, 23.974118, 0.158779, 0.007461, 1.050281, -0.052030, 0.025653, -0.000663
+LD
+-4119, 24.415294, 0.005269, -0.140297, 1.050463, -0.052647, 0.025136, -0.000694
+-4105, 24.456471, 0.005559, -0.139865, 1.050735, -0.052635, 0.025112, -0.000635
+-4117, 24.421176, 0.005273, -0.140439, 1.050992, -0.052608, 0.025244, -0.000740
+RD
+-4057, 24.597647, 0.010099, 0.160093, 1.050826, -0.052801, 0.025332, -0.000706
+-4046, 24.630000, 0.009812, 0.160029, 1.050554, -0.053320, 0.025580, -0.000406
+-4055, 24.603529, 0.009934, 0.160293, 1.051040, -0.053330, 0.025560, -0.000511
+"""
+SEED_NORMS = """
+1.006204657	1.007968538
+1.005967585	1.007731109
+1.006276408	1.008040318
+1.004816622	1.006578528
+1.004608175	1.006369695
+1.005035531	1.006797684
+1.007888677	1.009651313
+1.008157198	1.009920557
+1.008939806	1.010703849
+1.008478641	1.010242242
+1.007941093	1.009703971
+1.008978921	1.010743092
+"""
 
 
-def _seed_samples(realdata: Path) -> dict[str, np.ndarray]:
+def _seed_samples() -> dict[str, np.ndarray]:
     """The twelve real samples of the tilt-rig seed: {FD, AD, LD, RD: (3, 8) rows}."""
-    text = (realdata.parent / "seeds" / "tilt-rig-gravity-calibration.txt").read_text()
     out: dict[str, list] = {}
     cur = None
-    for line in text.splitlines():
+    for line in SEED_SAMPLES.splitlines():
         s = line.strip()
         if s in ("FD", "AD", "LD", "RD"):
             cur = s
             out[cur] = []
         elif cur and re.match(r"^-?\d+, ", s):
             out[cur].append([float(v) for v in s.split(",")])
-        elif cur:
-            cur = None
     return {k: np.array(v) for k, v in out.items()}
 
 
-def _seed_published_norms(realdata: Path) -> np.ndarray:
-    text = (realdata.parent / "seeds" / "tilt-rig-gravity-calibration.txt").read_text()
-    rows = re.findall(r"^\s*(1\.0\d+)\s+(1\.0\d+)\s*$", text, flags=re.MULTILINE)
+def _seed_published_norms() -> np.ndarray:
+    rows = re.findall(r"^\s*(1\.0\d+)\s+(1\.0\d+)\s*$", SEED_NORMS, flags=re.MULTILINE)
     return np.array(rows, dtype=float).reshape(-1)
 
 
-def test_tilt_rig_on_the_seed_samples(realdata):
-    d = _seed_samples(realdata)
+def test_tilt_rig_on_the_seed_samples():
+    d = _seed_samples()
     assert {k: v.shape for k, v in d.items()} == {k: (3, 8) for k in ("FD", "AD", "LD", "RD")}
     acc = {k: v[:, 2:5] for k, v in d.items()}  # columns: raw temp, temp, ax ay az (g), gyro
     rig = tc.tilt_rig({"fore_down": acc["FD"], "aft_down": acc["AD"], "left_down": acc["LD"],
@@ -55,7 +84,7 @@ def test_tilt_rig_on_the_seed_samples(realdata):
     everything = np.vstack(list(acc.values()))
     mine = np.abs(np.linalg.norm(rig.apply(everything), axis=1) - 1)
     seeds = np.abs(np.linalg.norm((everything + SEED_OFFSET) * SEED_GAIN, axis=1) - 1)
-    published = np.abs(_seed_published_norms(realdata) - 1)
+    published = np.abs(_seed_published_norms() - 1)
     assert published.size == 24 and published.min() > 0.004
     assert mine.max() < 1e-3
     assert mine.max() < seeds.max() and mine.mean() < seeds.mean() / 5

@@ -10,13 +10,13 @@ import time
 import numpy as np
 import pytest
 from triaxcal import sim
-from triaxcal.cli import main
-from triaxcal.io.multicapture import (
+from triaxcal.capture.multi import (
     capture_many,
     parse_id_reply,
     port_label,
     query_serial_number,
 )
+from triaxcal.cli import main
 
 RATE, SPEED = 100.0, 4.0
 
@@ -129,7 +129,7 @@ def test_same_serial_twice_gets_a_suffix(tmp_path):
 
 def test_cli_rejects_out_with_several_ports(tmp_path, capsys):
     assert main(["capture", "--port", "a", "--port", "b", "--protocol", "framed",
-                 "--out", str(tmp_path / "x.csv")]) == 1
+                 "-o", str(tmp_path / "x.csv")]) == 1
     assert "--out-dir" in capsys.readouterr().err
     assert main(["capture", "--port", "a", "--port", "a", "--protocol", "framed",
                  "--out-dir", str(tmp_path)]) == 1

@@ -1,5 +1,5 @@
 """Allan deviation (against allantools, streamed, bounded memory) and noise figures (against
-the simulator's truth), the Kalibr keys and ``triaxcal noise``."""
+the simulator's truth), the Kalibr keys (``triaxcal noise`` itself: test_noise_cli.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 import triaxcal as tc
-from triaxcal.cli import main
 from triaxcal.methods.noise import kalibr_yaml
 from triaxcal.sim import NoiseTruth, noise_chunks, simulate_noise
 
@@ -285,7 +284,7 @@ def test_kalibr_keys_in_si_units_from_the_worst_axis():
     assert keys["accelerometer_noise_density"] == pytest.approx(2e-4 * 9.80665, rel=0.03)
     assert keys["accelerometer_random_walk"] == pytest.approx(4e-5 * 9.80665, rel=0.25)
     assert all(v > 0 for v in keys.values())  # Kalibr refuses values <= 0
-    text = kalibr_yaml(g, a, rostopic="/imu0")
+    text = kalibr_yaml(g, a, ros_topic="/imu0")
     parsed = {ln.split(":")[0]: float(ln.split(":")[1].split("#")[0])
               for ln in text.splitlines() if ln and not ln.startswith("#")
               and not ln.startswith("rostopic")}
@@ -293,135 +292,10 @@ def test_kalibr_keys_in_si_units_from_the_worst_axis():
     for k, v in keys.items():
         assert parsed[k] == pytest.approx(v, rel=1e-6)
     assert "rad/s^2/sqrt(Hz)" in text and "m/s^3/sqrt(Hz)" in text
-    with pytest.raises(tc.CalibrationError, match="rostopic"):
-        kalibr_yaml(g, rostopic="/imu0\nevil: 1")
+    with pytest.raises(tc.CalibrationError, match="ros_topic"):
+        kalibr_yaml(g, ros_topic="/imu0\nevil: 1")
+    with pytest.warns(DeprecationWarning, match="ros_topic"):  # the old name, one release
+        assert kalibr_yaml(g, a, rostopic="/imu0") == text
     counts = tc.noise_figures(simulate_noise(TRUTH, 50_000, 50.0), 50.0)  # unit "counts"
     with pytest.raises(tc.CalibrationError, match="cannot be converted to rad/s"):
         tc.kalibr_noise(counts)
-
-
-# ------------------------------------------------------------------------------ CLI
-
-
-@pytest.fixture(scope="module")
-def still_session(tmp_path_factory):
-    """A session CSV at rest: accel and gyro int16 counts at 50 Hz for 40 minutes."""
-    n, rate = 120_000, 50.0
-    g = simulate_noise(TRUTH, n, rate, seed=3) * 131 + [50, -20, 10]
-    a = simulate_noise(NoiseTruth(white=1e-4, random_walk=2e-5, unit="g"), n, rate,
-                       seed=4) * 16384 + [0, 0, 16384]
-    t = np.arange(n) / rate
-    path = tmp_path_factory.mktemp("noise") / "still.csv"
-    np.savetxt(path, np.column_stack([t, np.rint(a), np.rint(g)]), delimiter=",",
-               header="t,ax,ay,az,gx,gy,gz", comments="", fmt=["%.3f"] + ["%d"] * 6)
-    return path
-
-
-def test_cli_prints_the_figures_and_draws_the_slopes(still_session, tmp_path, capsys):
-    fig = tmp_path / "allan.png"
-    args = [str(still_session), "--unit", "deg/s", "--counts-per-unit", "131"]
-    if tc.report.have_matplotlib():
-        args += ["--plot", str(fig)]
-    assert main(["noise", *args]) == 0
-    out = capsys.readouterr().out
-    assert "gyro noise figures: 120000 samples at 50 Hz" in out
-    assert "angle random walk" in out and "bias instability" in out
-    line = next(ln for ln in out.splitlines() if "angle random walk" in ln)
-    assert float(line.split()[3]) == pytest.approx(0.005, rel=0.05)
-    if tc.report.have_matplotlib():
-        assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-
-
-def test_cli_writes_kalibr_keys_for_both_sensors(still_session, tmp_path, capsys):
-    out = tmp_path / "imu_noise.yaml"
-    rc = main(["noise", str(still_session), "--sensor", "both", "--unit",
-               "gyro=deg/s,accel=g", "--counts-per-unit", "gyro=131,accel=16384",
-               "--format", "kalibr", "-o", str(out)])
-    assert rc == 0
-    text = out.read_text()
-    for key in ("gyroscope_noise_density", "gyroscope_random_walk",
-                "accelerometer_noise_density", "accelerometer_random_walk"):
-        assert text.count(f"\n{key}: ") == 1
-    dens = float(text.split("gyroscope_noise_density:")[1].split()[0])
-    assert dens == pytest.approx(0.005 * math.pi / 180, rel=0.05)
-    assert "update_rate: 50" in text
-
-
-def test_cli_refuses_what_it_cannot_do(still_session, tmp_path, capsys):
-    assert main(["noise", str(still_session), "--format", "kalibr"]) == 1
-    assert "cannot be converted to rad/s" in capsys.readouterr().err
-    assert main(["noise", str(tmp_path / "missing.csv")]) == 1
-    bad = tmp_path / "bad.csv"
-    bad.write_text("t,gx,gy,gz\n0,1,2,3\n0.1,1,x,3\n")
-    assert main(["noise", str(bad)]) == 1
-    assert "not numbers" in capsys.readouterr().err
-    assert main(["noise", str(still_session), "--counts-per-unit", "131"]) == 1
-    assert "needs --unit" in capsys.readouterr().err
-
-
-def test_cli_reads_an_autopilot_log_at_rest(realdata, capsys):
-    """PX4's sample_log_small.ulg: 6.3 s of sensor_combined at ~205 Hz on a bench (rad/s)."""
-    pytest.importorskip("pyulog")
-    log = realdata / "px4-pyulog-samples" / "sample_log_small.ulg"
-    assert main(["noise", str(log), "--format", "json"]) == 0
-    captured = capsys.readouterr()
-    d = __import__("json").loads(captured.out)["gyro"]
-    assert d["unit"] == "rad/s" and 200 < d["rate_hz"] < 210
-    assert "too short to measure rate random walk" in captured.err
-    # up to 1 s the deviation falls as N / sqrt(tau) (white noise), with a bump near 0.08 s (a
-    # vibration of about 6 Hz on the bench): the fitted N is the typical sqrt(tau) * sigma there
-    rec = tc.read_log(log)
-    ad = tc.allan(np.asarray(rec.stream("gyro").data), rec.stream("gyro").rate_hz, taus="log")
-    white = ad.taus <= 1.0
-    for k, ax in enumerate("xyz"):
-        typical = float(np.median(ad.adev[white, k] * np.sqrt(ad.taus[white])))
-        assert d["axes"][ax]["white"] == pytest.approx(typical, rel=0.15)
-        assert d["axes"][ax]["resolved"]["white"]
-
-
-def test_cli_writes_the_json_that_export_takes(still_session, tmp_path, capsys):
-    out = tmp_path / "noise.json"
-    assert main(["noise", str(still_session), "--sensor", "both", "--unit",
-                 "gyro=deg/s,accel=g", "--counts-per-unit", "gyro=131,accel=16384",
-                 "--format", "kalibr", "-o", str(out)]) == 0
-    noise = __import__("json").loads(out.read_text())
-    from triaxcal.export.kalibr import kalibr_imu_yaml
-
-    text = kalibr_imu_yaml(None, topic="/imu0", rate_hz=50.0, model="calibrated", noise=noise)
-    assert f"gyroscope_noise_density: {noise['gyroscope_noise_density']!r}" in text
-
-
-def test_readme_noise_example_runs(capsys):
-    import re
-
-    from conftest import readme_section
-
-    code = re.findall(r"```python\n(.*?)```", readme_section("Noise figures"), re.S)[0]
-    ns: dict = {}
-    exec(compile(code, "README noise example", "exec"), ns)
-    out = capsys.readouterr().out
-    assert "angle random walk" in out and "gyroscope_noise_density" in out
-    assert ns["acc"].n == 1_000_000
-    for a in ns["nf"].axes:
-        assert abs(a.white / 0.005 - 1) < 0.05
-
-
-def test_cli_reads_a_table_in_chunks_without_changing_the_result(still_session, monkeypatch,
-                                                                  capsys):
-    import json as _json
-
-    import triaxcal.cli.noise as cli_noise
-
-    args = ["noise", str(still_session), "--format", "json", "--taus", "octave", "--rate", "50"]
-    assert main(args) == 0
-    whole = _json.loads(capsys.readouterr().out)
-    monkeypatch.setattr(cli_noise, "CHUNK_ROWS", 7_777)  # 16 chunks with a ragged tail
-    sizes = [len(c) for c, _ in cli_noise.read_chunks(still_session, [4, 5, 6])]
-    assert len(sizes) == 16 and sum(sizes) == 120_000
-    assert main(args) == 0
-    chunked = _json.loads(capsys.readouterr().out)
-    assert chunked == whole
-    data = np.loadtxt(still_session, delimiter=",", skiprows=1)
-    ad = tc.allan(data[:, 4:7], 50.0, taus="octave", exact_up_to=65536)
-    fig = tc.noise_figures(ad, sensor="gyro")
-    assert whole["gyro"]["axes"]["x"]["white"] == pytest.approx(fig.axes[0].white, rel=1e-12)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 import triaxcal as tc
-from triaxcal import _options as opt
+from triaxcal._checks import options as opt
 from triaxcal.methods import gyro as tg
 from triaxcal.report import empty_regions, plot_report, quality_report
 

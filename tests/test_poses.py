@@ -8,9 +8,15 @@ import doctest
 import numpy as np
 import pytest
 import triaxcal as tc
-import triaxcal.poses as poses_mod
-from triaxcal.poses import HEAD_ROWS, PoseSettings, sensor_columns, session_poses
-from triaxcal.session.pose_options import add_pose_options, settings_from_args, stored_settings
+import triaxcal.detect.session as poses_mod
+from triaxcal.cli._pose_options import add_pose_options, settings_from_args
+from triaxcal.detect.session import (
+    HEAD_ROWS,
+    PoseSettings,
+    sensor_columns,
+    session_poses,
+    stored_settings,
+)
 
 NAMES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp")
 
@@ -85,9 +91,16 @@ def test_settings_are_validated():
         PoseSettings.from_dict({"window": 25, "mystery": 1})
     with pytest.raises(tc.CalibrationError, match="accelerometer"):
         PoseSettings().resolve(("t", "gx", "gy", "gz"), np.zeros((10, 4)))
-    with pytest.raises(tc.CalibrationError, match="--rate-hz"):
+    # the API's names; a command's flags when a command runs
+    from triaxcal._checks.spelling import command_line
+
+    with pytest.raises(tc.CalibrationError, match=r"holdoff_s needs .* \(rate_hz;"):
         PoseSettings(holdoff_s=2).resolve(("ax", "ay", "az"), np.ones((10, 3)))
-    with pytest.raises(tc.CalibrationError, match="--counts-per-g"):
+    with pytest.raises(tc.CalibrationError, match=r"\(counts_per_g\)"):
+        PoseSettings().resolve(("ax", "ay", "az"), np.zeros((10, 3)))
+    with command_line(), pytest.raises(tc.CalibrationError, match=r"--holdoff needs .*--rate-hz"):
+        PoseSettings(holdoff_s=2).resolve(("ax", "ay", "az"), np.ones((10, 3)))
+    with command_line(), pytest.raises(tc.CalibrationError, match="--counts-per-g"):
         PoseSettings().resolve(("ax", "ay", "az"), np.zeros((10, 3)))
     assert PoseSettings.from_dict(PoseSettings(holdoff_s=2.0).to_dict()) == PoseSettings(
         holdoff_s=2.0)
@@ -111,7 +124,7 @@ def test_command_line_options_map_to_settings():
     s = settings_from_args(p.parse_args(["--window", "50", "--accel-threshold", "0.05",
                                          "--gyro-threshold", "40", "--mag-threshold", "off",
                                          "--holdoff", "2", "--rate-hz", "100",
-                                         "--units-per-g", "8192"]))
+                                         "--counts-per-g", "8192"]))
     assert s == PoseSettings(window=50, accel_threshold_g=0.05, gyro_threshold=40.0,
                              use_mag=False, holdoff_s=2.0, rate_hz=100.0, counts_per_g=8192.0)
     for bad in (["--window", "0"], ["--gyro-threshold", "-3"], ["--holdoff", "nan"],
@@ -132,11 +145,12 @@ def test_docstrings_run():
     assert doctest.testmod(poses_mod, raise_on_error=True).failed == 0
 
 
+@pytest.mark.slow
 def test_capture_with_poses_84_stops_by_itself_and_fit_agrees(tmp_path, capsys):
     # `triaxcal capture --poses 84` on the globe scheme ends by itself (it stopped at 63 when
     # only the accelerometer ended a pose), and `fit --poses` on the file finds the same poses
+    from triaxcal.capture.run import capture
     from triaxcal.cli import main
-    from triaxcal.io.capture import capture
     from triaxcal.io.serial import SerialReader
 
     imu = tc.sim.SimIMU(1)

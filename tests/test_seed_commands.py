@@ -1,5 +1,6 @@
-"""The seeds' methods from the command line: every command of the README section, run as
-written, prints what the README shows and writes a part that export and report take."""
+"""The methods from the command line: every command of the documentation page
+docs/guide/method-commands.md, run as written, prints what the page shows and writes a part that
+export and report take."""
 
 from __future__ import annotations
 
@@ -13,15 +14,15 @@ import triaxcal as tc
 from triaxcal.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
-SECTION = "## The seeds' methods from the command line"
+PAGE = ROOT / "docs" / "guide" / "method-commands.md"
 
 
-def readme_blocks() -> list[tuple[str, str]]:
-    """(info string, body) of every fenced block of the README section, in order."""
-    text = (ROOT / "README.md").read_text()
-    start = text.index(SECTION)
-    end = text.index("\n## ", start + len(SECTION))
-    return re.findall(r"```([^\n]*)\n(.*?)```", text[start:end], re.S)
+def page_blocks(realdata: bool = False) -> list[tuple[str, str]]:
+    """(info string, body) of every fenced block of the page, in order: those that run on the
+    simulator, or (``realdata``) those marked ``realdata``, which run on the published
+    recordings (tests/test_method_commands.py)."""
+    blocks = re.findall(r"```([^\n]*)\n(.*?)```", PAGE.read_text(), re.S)
+    return [(info, body) for info, body in blocks if ("realdata" in info.split()) == realdata]
 
 
 def console(body: str) -> list[tuple[str, list[str]]]:
@@ -36,13 +37,13 @@ def console(body: str) -> list[tuple[str, list[str]]]:
 
 
 def run_section(tmp_path: Path, monkeypatch, capsys) -> list[tuple[str, list[str], list[str]]]:
-    """Run the section in ``tmp_path``: (command, README's output, actual output)."""
+    """Run the section in ``tmp_path``: (command, the page.s output, actual output)."""
     monkeypatch.chdir(tmp_path)
     done = []
-    for info, body in readme_blocks():
+    for info, body in page_blocks():
         words = info.split()
         if words and words[0] == "python":
-            exec(compile(body, "README.md", "exec"), {})
+            exec(compile(body, str(PAGE), "exec"), {})
             capsys.readouterr()
         elif any(w.startswith("file=") for w in words):
             name = next(w for w in words if w.startswith("file="))[5:]
@@ -58,17 +59,17 @@ def run_section(tmp_path: Path, monkeypatch, capsys) -> list[tuple[str, list[str
     return done
 
 
-def test_readme_section_runs_and_prints_what_it_shows(tmp_path, monkeypatch, capsys):
+def test_page_runs_and_prints_what_it_shows(tmp_path, monkeypatch, capsys):
     done = run_section(tmp_path, monkeypatch, capsys)
     assert len(done) >= 6
     for cmd, want, got in done:
-        assert got == want, f"{cmd}\n--- README\n" + "\n".join(want) + "\n--- now\n" + \
+        assert got == want, f"{cmd}\n--- page\n" + "\n".join(want) + "\n--- now\n" + \
             "\n".join(got)
 
 
 @pytest.fixture(scope="module")
 def section(tmp_path_factory):
-    """The README section's files and calibration files, made once."""
+    """The page.s files and calibration files, made once."""
     import contextlib
     import io
     import os
@@ -77,11 +78,11 @@ def section(tmp_path_factory):
     old = os.getcwd()
     os.chdir(d)
     try:
-        for info, body in readme_blocks():
+        for info, body in page_blocks():
             words = info.split()
             if words and words[0] == "python":
                 with contextlib.redirect_stdout(io.StringIO()):
-                    exec(compile(body, "README.md", "exec"), {})
+                    exec(compile(body, str(PAGE), "exec"), {})
             elif any(w.startswith("file=") for w in words):
                 name = next(w for w in words if w.startswith("file="))[5:]
                 (d / name).write_text(body)
@@ -108,12 +109,12 @@ def _fails(capsys, *argv: str) -> str:
 
 # --- sphere-center ----------------------------------------------------------------------------
 
-GLOBE_OFFSET = tc.sim.SimIMU(1).truth.accel.offset  # the README's board (its scale is forced)
+GLOBE_OFFSET = tc.sim.SimIMU(1).truth.accel.offset  # the page.s board (its scale is forced)
 
 
 def test_sphere_center_finds_the_seed_offset(section, tmp_path, capsys):
     cal = tc.Calibration.load(section / "cal.json")
-    # the README ran descent, then grid, into cal.json: the grid's part is the one kept
+    # the page ran descent, then grid, into cal.json: the grid's part is the one kept
     assert cal.accel.stats["method"] == "grid" and cal.accel.model == "sphere"
     np.testing.assert_allclose(cal.accel.offset, GLOBE_OFFSET, atol=3.0)  # counts (0.2 mg)
     np.testing.assert_allclose(cal.accel.matrix, np.eye(3) / 16384)
@@ -175,10 +176,12 @@ def test_sphere_center_scales_and_units(section, tmp_path, capsys):
     assert tc.Calibration.load(out).accel is not None  # the other sensor kept
     for bad, why in ((["--radius", "1g"], "raw units"), (["--radius", "-3"], "radius"),
                      (["--radius", "16384", "--start", "1,2"], "--start"),
-                     (["--radius", "16384", "--scale-to", "3"], "unit"),
-                     (["--radius", "16384", "--method", "grid", "--half-width", "0"],
-                      "half-width")):
+                     (["--radius", "16384", "--scale-to", "3"], "unit")):
         assert why in _fails(capsys, "sphere-center", section / "globe.csv", *bad, "-o", out)
+    with pytest.raises(SystemExit):  # refused as it is parsed
+        main(["sphere-center", str(section / "globe.csv"), "--radius", "16384", "--method",
+              "grid", "--half-width", "0", "-o", str(out)])
+    assert "--half-width: expected a number > 0" in capsys.readouterr().err
     few = tmp_path / "few.csv"
     few.write_text("ax,ay,az\n1,2,3\n4,5,6\n")
     assert "at least 4" in _fails(capsys, "sphere-center", few, "--radius", "10", "-o", out)
@@ -216,10 +219,9 @@ def test_tilt_rig_reproduces_the_seed(section, capsys):
 
 
 def _seed_tilts(section: Path) -> dict[str, np.ndarray]:
-    from triaxcal.cli.tilt_rig import read_tilts
+    from triaxcal.io.sections import read_tilts
 
-    _, groups = read_tilts(section / "tilt.txt")
-    return {k: v[:, 2:5] for k, v in groups.items()}
+    return {k: v[:, 2:5] for k, v in read_tilts(section / "tilt.txt").groups.items()}
 
 
 def test_tilt_rig_layouts_and_errors(section, tmp_path, capsys):

@@ -23,6 +23,8 @@ from triaxcal.io.board_poses import BoardPoseDecoder, BoardPoseSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 SRC = ROOT / "firmware" / "src"
+#: The portable library the firmware's detector and CRC live in.
+LIB = ROOT / "firmware" / "lib" / "triaxcal" / "src"
 CC = shutil.which("cc") or shutil.which("gcc")
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler for the host (cc)")
@@ -51,9 +53,10 @@ WRITER = ctypes.CFUNCTYPE(None, ctypes.c_uint8)
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory):
     out = tmp_path_factory.mktemp("still") / "libstill.so"
-    srcs = [str(SRC / f) for f in ("still.c", "protocol.c", "cobs.c", "crc16.c")]
+    srcs = [str(LIB / "still.c"), str(SRC / "protocol.c"), str(SRC / "cobs.c"),
+            str(LIB / "crc16.c")]
     proc = subprocess.run([CC, "-shared", "-fPIC", "-O1", "-std=gnu99", "-Wall", "-Wextra",
-                           "-Werror", f"-I{SRC}", *srcs, "-o", str(out)],
+                           "-Werror", f"-I{SRC}", f"-I{LIB}", *srcs, "-o", str(out)],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     so = ctypes.CDLL(str(out))

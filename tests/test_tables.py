@@ -107,7 +107,7 @@ def test_a_folder_a_device_and_a_missing_file(tmp_path):
     (tmp_path / "session.csv").write_text("1,2,3\n")
     with pytest.raises(tc.CalibrationError, match=r"is a folder.*it holds session.csv"):
         read_table(tmp_path)
-    with pytest.raises(tc.CalibrationError, match="is a device"):
+    with pytest.raises(tc.CalibrationError, match="is a character device, not a regular file"):
         read_table("/dev/zero")
     with pytest.raises(tc.CalibrationError, match="not found"):
         read_table(tmp_path / "nope.csv")

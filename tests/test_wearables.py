@@ -57,8 +57,9 @@ def test_geneactiv_header_pages_and_factory_calibration(files):
     gains, offsets = np.array([25875, 25734, 25538]), np.array([439, -662, -3056])
     assert np.array_equal(rec.factory.offset, offsets / 100)
     assert np.array_equal(rec.factory.diag, 100 / gains)
-    # skdh refuses the cut file; the page decoder reads its 16 whole pages of 300 samples
-    assert "3600" in rec.meta["skdh_refused"] and rec.reader.endswith("page decoder")
+    # the file is cut (its header says 222,048 pages), so it is not handed to skdh; the page
+    # decoder reads its 16 whole pages of 300 samples
+    assert "222048 pages" in rec.meta["skdh_refused"] and rec.reader.endswith("page decoder")
     counts, temp, rate, pages = read_geneactiv_pages(path)
     assert pages == 16 and counts.shape == (4800, 3) and rate == 85.7
     assert temp[0] == 21.5 and np.all(temp[:300] == 21.5)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import triaxcal as tc
+from triaxcal.calibration.parts import part_from_yaw
 from triaxcal.sim import Script, SimIMU, rotvec_to_matrix
 
 FIELD_UT, INC_DEG = 48.4, 63.5
@@ -64,7 +65,7 @@ def test_yaw_only_recovers_the_horizontal_calibration_and_headings(boat):
     tilted = tc.heading_errors(a2, y.apply(m2), att2)
     assert _rms(tilted) < y.tilt_heading_deg
     assert any("5 % mismatch" in t for t in y.limits)
-    part = y.part(source="sim")
+    part = part_from_yaw(y, source="sim")
     assert part.model == "yaw" and part.stats["yaw"]["vertical"] == pytest.approx(V)
     assert tc.Calibration.from_json(tc.Calibration(mag=part).to_json()).mag == part
 
@@ -72,7 +73,7 @@ def test_yaw_only_recovers_the_horizontal_calibration_and_headings(boat):
 def test_yaw_with_the_wmm_field(boat, monkeypatch):
     truth, rec, _ = boat
     mag, acc, _ = _poses(rec, truth)
-    f = tc.field.ExpectedField(
+    f = tc.ExpectedField(
         model="WMM2025", backend="test", date="2026-05-17", decimal_year=2026.37,
         lat_deg=47.37, lon_deg=8.54, alt_m=408.0, total_ut=FIELD_UT, horizontal_ut=H,
         north_ut=H, east_ut=0.0, down_ut=-V, inclination_deg=INC_DEG, declination_deg=0.0)

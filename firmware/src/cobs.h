@@ -8,9 +8,10 @@
 extern "C" {
 #endif
 
-/* Encode len bytes of src into dst (room for len + len / 254 + 1 bytes); returns the encoded
- * length. The result holds no 0x00 byte; the caller sends the 0x00 delimiter. */
-uint16_t cobs_encode(const uint8_t *src, uint16_t len, uint8_t *dst);
+/* Send the encoding of len bytes of src through put, a byte at a time (no output buffer: the
+ * frames of the board's calibration are sent from deep in its stack). The encoding holds no
+ * 0x00 byte; the caller sends the 0x00 delimiter. */
+void cobs_write(const uint8_t *src, uint16_t len, void (*put)(uint8_t));
 
 #ifdef __cplusplus
 }

@@ -9,7 +9,10 @@ static proto_writer put;
 static uint8_t mode = PROTO_MODE_POLLED;
 static uint8_t seq;
 
-static uint8_t pkt[MOTIONCAL_PACKET_LEN]; /* the longest packet */
+#define PKT_MAX (PROTO_RECORD_PACKET_LEN > MOTIONCAL_PACKET_LEN ? PROTO_RECORD_PACKET_LEN \
+                                                                : MOTIONCAL_PACKET_LEN)
+static uint8_t pkt[PKT_MAX]; /* the longest packet */
+static uint8_t command;
 static uint8_t pkt_len;                   /* 0: not inside a packet */
 static uint8_t pkt_need;                  /* length of the packet being received */
 static uint8_t pkt_second;                /* its second byte */
@@ -29,6 +32,10 @@ uint8_t proto_mode(void) { return mode; }
 const struct motioncal *proto_cal(void) { return &cal; }
 
 const struct still_settings *proto_pose_settings(void) { return &pose_settings; }
+
+const uint8_t *proto_record_packet(void) { return pkt + 2; }
+
+uint8_t proto_command(void) { return command; }
 
 void proto_put_str(const char *s)
 {
@@ -81,22 +88,25 @@ void proto_send_binary(const int16_t *values, uint8_t k)
     put('\n');
 }
 
-/* COBS(seq, payload, CRC-16/CCITT-FALSE LE) + 0x00; n <= PROTO_FRAME_MAX bytes. */
-#define PROTO_FRAME_MAX (2 + 2 + 2 + 4 * PROTO_MAX_CHANNELS)
-static void send_frame(const uint8_t *payload, uint8_t n)
+/* COBS(seq, head, body, CRC-16/CCITT-FALSE LE) + 0x00; hn + bn <= PROTO_FRAME_MAX bytes (the
+ * longest: a 'K' frame, 3 + TC_STORE_BYTES). Head and body are separate so that a record is
+ * sent from where it lies, without a copy on the stack. */
+#define PROTO_FRAME_MAX (3 + TC_STORE_BYTES)
+static void send_frame2(const uint8_t *head, uint8_t hn, const uint8_t *body, uint8_t bn)
 {
     uint8_t raw[1 + PROTO_FRAME_MAX + 2];
-    uint8_t enc[sizeof raw + sizeof raw / 254 + 1];
-    uint8_t m = 0;
+    uint8_t m = 0, i;
     raw[m++] = seq++;
-    for (uint8_t i = 0; i < n; i++) raw[m++] = payload[i];
+    for (i = 0; i < hn; i++) raw[m++] = head[i];
+    for (i = 0; i < bn; i++) raw[m++] = body[i];
     uint16_t crc = crc16_ccitt(raw, m);
     raw[m++] = (uint8_t)(crc & 0xFF);
     raw[m++] = (uint8_t)(crc >> 8);
-    uint16_t len = cobs_encode(raw, m, enc);
-    for (uint16_t i = 0; i < len; i++) put(enc[i]);
+    cobs_write(raw, m, put);
     put(0);
 }
+
+static void send_frame(const uint8_t *payload, uint8_t n) { send_frame2(payload, n, 0, 0); }
 
 static uint8_t put_le(uint8_t *p, uint32_t v, uint8_t bytes)
 {
@@ -149,6 +159,39 @@ void proto_send_settings(uint8_t accepted, const struct still_settings *s)
     payload[2] = STILL_SETTINGS_VERSION;
     still_pack(s, payload + 3);
     send_frame(payload, sizeof payload);
+}
+
+void proto_send_record(uint8_t status, uint8_t flags, const uint8_t record[TC_STORE_BYTES])
+{
+    const uint8_t head[3] = {PROTO_FRAME_RECORD, status, flags};
+    send_frame2(head, sizeof head, record, TC_STORE_BYTES);
+}
+
+static uint8_t put_f32(uint8_t *p, float v)
+{
+    uint32_t u;
+    memcpy(&u, &v, sizeof u); /* IEEE binary32 */
+    return put_le(p, u, 4);
+}
+
+void proto_send_quality(const struct proto_quality *q)
+{
+    uint8_t payload[39];
+    uint8_t n = 0, i;
+    payload[n++] = PROTO_FRAME_QUALITY;
+    payload[n++] = 1; /* version of the frame */
+    payload[n++] = (uint8_t)q->code;
+    payload[n++] = (uint8_t)q->descent_code;
+    n += put_le(payload + n, q->warnings, 2);
+    n += put_le(payload + n, q->n, 2);
+    payload[n++] = q->iterations;
+    n += put_le(payload + n, q->descent_iterations, 2);
+    for (i = 0; i < 3; i++) n += put_f32(payload + n, q->center[i]);
+    n += put_f32(payload + n, q->rms);
+    n += put_f32(payload + n, q->spread);
+    for (i = 0; i < 6; i++) payload[n++] = q->faces[i];
+    n += put_le(payload + n, q->stack_free, 2);
+    send_frame(payload, n);
 }
 
 void proto_send_text(const int16_t *values, uint8_t k)
@@ -278,6 +321,10 @@ enum proto_event proto_feed(uint8_t byte, uint16_t now_ms)
     } else if (pkt_len) {
         pkt[pkt_len++] = byte;
         if (pkt_len < pkt_need) return PROTO_EV_NONE;
+        if (pkt[0] == PROTO_RECORD_START) {
+            pkt_len = 0;
+            return PROTO_EV_RECORD; /* its CRC is the record's own: board_cal checks it */
+        }
         return pkt[0] == PROTO_SETTINGS_START ? settings_done() : packet_done();
     }
     switch (byte) {
@@ -285,6 +332,17 @@ enum proto_event proto_feed(uint8_t byte, uint16_t now_ms)
         return packet_start(byte, MOTIONCAL_PACKET_LEN, 84, now_ms);
     case PROTO_SETTINGS_START:
         return packet_start(byte, PROTO_SETTINGS_PACKET_LEN, PROTO_SETTINGS_VERSION, now_ms);
+    case PROTO_RECORD_START:
+        return packet_start(byte, PROTO_RECORD_PACKET_LEN, PROTO_RECORD_VERSION, now_ms);
+    case PROTO_CAL_COMPUTE:
+    case PROTO_CAL_REPORT:
+    case PROTO_CAL_APPLY:
+    case PROTO_CAL_RAW:
+#if SIMULATED
+    case PROTO_CAL_DAMAGE:
+#endif
+        command = byte;
+        return PROTO_EV_COMMAND;
     case PROTO_REQUEST:
         return PROTO_EV_REQUEST;
     case PROTO_MODE_POLLED:

@@ -7,6 +7,7 @@ import numpy.typing as npt
 
 __all__ = [
     "__version__",
+    "BOUNDS",
     "CalibrationError",
     "NonFiniteError",
     "TooFewPointsError",
@@ -26,6 +27,8 @@ __all__ = [
 ]
 
 __version__: str
+#: The core's physical bounds and warning thresholds (rust/bounds.rs), by name.
+BOUNDS: dict[str, float]
 
 class CalibrationError(ValueError): ...
 class NonFiniteError(CalibrationError): ...

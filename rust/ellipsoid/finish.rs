@@ -170,8 +170,8 @@ pub(super) fn finish<const P: usize>(
         }
         if !fin.converged {
             warnings.push(format!(
-                "the fit did not converge in {} iterations: the result may be inaccurate; raise \
-                 max_iter or check the data",
+                "the fit did not converge in {} iterations: the result may be inaccurate; check \
+                 that the data determine the model (or allow more iterations)",
                 opts.max_iter
             ));
         }

@@ -552,8 +552,8 @@ fn fit_rescaled(points: &[[f64; 3]], opts: &FitOptions, max_abs: f64) -> Result<
 
 fn not_determined(model: Model, detail: &str) -> CalError {
     let simpler = match model {
-        Model::Full => " or use a simpler model (model=\"axis\" or \"sphere\")",
-        Model::Axis => " or use model=\"sphere\"",
+        Model::Full => " or use a simpler model (the axis or the sphere model)",
+        Model::Axis => " or use the sphere model",
         Model::Sphere => "",
     };
     CalError::Degenerate {

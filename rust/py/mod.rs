@@ -5,6 +5,7 @@
 //! and builds the `EllipsoidFit`, for the sake of small calls.
 
 mod allan;
+mod bounds;
 mod errors;
 mod fit;
 mod logs;
@@ -21,7 +22,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 /// Borrows an (N, 3) aligned, C-contiguous float64 array as points, without copying. (The
-/// Python facade converts anything else first: `triaxcal._validate.as_points`.)
+/// Python facade converts anything else first: `triaxcal._checks.arrays.as_points`.)
 fn points<'a>(arr: &'a PyReadonlyArray2<'_, f64>) -> PyResult<&'a [[f64; 3]]> {
     let shape = arr.shape();
     if shape[1] != 3 {
@@ -257,5 +258,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<allan::AllanStream>()?;
     m.add_function(wrap_pyfunction!(logs::read_ulog, m)?)?;
     m.add_function(wrap_pyfunction!(logs::read_dataflash, m)?)?;
+    bounds::add(m)?;
     Ok(())
 }

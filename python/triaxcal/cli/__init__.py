@@ -9,13 +9,15 @@ import sys
 from typing import Sequence
 
 from .. import __version__
-from ..errors import CalibrationError
+from .._checks.spelling import command_line
+from ..errors import CalibrationError, RefusedError
 from ..io.files import os_error_message
-from ._help import PlainHelpFormatter
+from ._help import PlainHelpFormatter, missing_required
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = ("demo", "capture", "fit", "batch", "export", "report", "send", "sphere_center",
-            "tilt_rig", "gyro_gains", "temperature", "noise", "diff")
+            "tilt_rig", "gyro_gains", "temperature", "ferraris", "imu", "turntable", "noise",
+            "diff", "board")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,8 +46,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    missing = missing_required(args)
+    if missing:
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        sub.choices[args.command].error(
+            f"the following arguments are required: {', '.join(missing)}")
     try:
-        return int(args.func(args) or 0)
+        with command_line():  # messages name the options as flags
+            return int(args.func(args) or 0)
+    except RefusedError as exc:  # refused (the validity gate, data not at rest): nothing written
+        print(f"triaxcal {args.command}: {exc.verb}: {exc}", file=sys.stderr)
+        return 2
     except CalibrationError as exc:
         print(f"triaxcal {args.command}: error: {exc}", file=sys.stderr)
         return 1

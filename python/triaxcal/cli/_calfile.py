@@ -1,66 +1,45 @@
-"""Writing one sensor's part into a calibration file, as ``triaxcal fit`` does: a new file, or
-an existing one whose other parts are kept. Shared by the seed-method commands."""
+"""Writing one sensor's part into a calibration file from a method command, as ``triaxcal fit``
+does (:func:`triaxcal.calibration.store.store_part`, after the validity gate)."""
 
 from __future__ import annotations
 
 import argparse
 import hashlib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..calibration import Calibration, SensorCalibration
-from ..errors import CalibrationError
+from ..calibration.part import SensorCalibration
+from ..calibration.store import existing_calibration, store_part, store_parts
 
 
 def add_output_options(p: argparse.ArgumentParser) -> None:
-    """``-o CAL.json`` (required), ``--new`` and ``--sensor-id``."""
+    """``-o CAL.json`` (required), ``--new``, ``--sensor-id`` and ``--force``."""
     p.add_argument("-o", "--output", required=True, metavar="CAL.json",
                    help="calibration file to write; an existing one keeps its other sensors")
     p.add_argument("--new", action="store_true",
-                   help="overwrite CAL.json instead of adding this sensor to it")
+                   help="overwrite CAL.json instead of adding to it")
     p.add_argument("--sensor-id", default=None, help="board / sensor id to record")
+    p.add_argument("--force", action="store_true",
+                   help="write the part even when the validity gate refuses it (marked "
+                        "\"valid\": false with the reasons)")
 
 
 def existing_part(path: str | Path, sensor: str, new: bool) -> SensorCalibration | None:
     """The sensor's part already in ``path`` (None if there is none, or with ``new``)."""
-    cal = _load(Path(path), new)
+    cal = existing_calibration(path, new=new)
     return None if cal is None else getattr(cal, sensor)
 
 
-def _load(path: Path, new: bool) -> Calibration | None:
-    if new or not path.exists():
-        return None
-    try:
-        return Calibration.load(path)
-    except CalibrationError as exc:
-        raise CalibrationError(
-            f"{path} exists but is not a calibration file ({exc}); pass --new to replace it"
-        ) from None
-
-
 def save_part(args: Any, sensor: str, part: SensorCalibration) -> str:
-    """Write ``part`` as ``sensor`` into ``args.output``; returns "wrote" or "updated"."""
-    path = Path(args.output)
-    if path.is_dir():
-        raise CalibrationError(f"-o {path} is a folder: give a file name, e.g. {path}/cal.json")
-    if not path.parent.exists():
-        raise CalibrationError(f"-o {path}: the folder {path.parent} does not exist")
-    cal = _load(path, args.new)
-    if cal is None:
-        parts: dict[str, Any] = {sensor: part}
-        cal = Calibration(**parts, sensor_id=args.sensor_id or "")
-        verb = "wrote"
-    else:
-        changes: dict[str, Any] = {sensor: part}
-        if args.sensor_id is not None:
-            changes["sensor_id"] = args.sensor_id
-        cal = cal.replace(**changes)
-        verb = "updated"
-    try:
-        cal.save(path)
-    except OSError as exc:
-        raise CalibrationError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return verb
+    """Write ``part`` (already through the gate) as ``sensor`` into ``args.output``; returns
+    "wrote" or "updated"."""
+    return store_part(args.output, sensor, part, new=args.new, sensor_id=args.sensor_id).verb
+
+
+def save_parts(args: Any, parts: Mapping[str, SensorCalibration]) -> str:
+    """Write several parts (already through the gate) into ``args.output`` in one write."""
+    return store_parts(args.output, parts, new=args.new, sensor_id=args.sensor_id).verb
 
 
 def file_sha256(path: str | Path) -> str:

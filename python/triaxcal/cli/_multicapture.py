@@ -6,15 +6,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..capture.multi import capture_many
+from ..capture.run import channel_names
 from ..errors import CalibrationError
-from ..io.capture import channel_names
-from ..io.multicapture import capture_many
 
 
-def run_many(args: argparse.Namespace, channels: int | None) -> int:
-    if args.out is not None:
+def run_many(args: argparse.Namespace, channels: int | None, poll_interval_s: float) -> int:
+    if args.output is not None:
         raise CalibrationError(
-            "several --port: give --out-dir DIR (one session file per board), not --out"
+            "several --port: give --out-dir DIR (one session file per board), not -o/--output"
         )
     if args.out_dir is None:
         raise CalibrationError("several --port: give --out-dir DIR for the session files")
@@ -39,7 +39,7 @@ def run_many(args: argparse.Namespace, channels: int | None) -> int:
             "stream": args.stream,
             "request_byte": args.request_byte,
             "switch_mode": not args.no_mode_byte,
-            "poll_interval_s": 1.0 / args.poll_hz if args.poll_hz else 0.0,
+            "poll_interval_s": poll_interval_s,
             "board_poses": getattr(args, "board_settings", None),
         },
         samples=args.samples,

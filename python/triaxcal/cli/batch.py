@@ -1,5 +1,5 @@
-"""``triaxcal batch SESSIONS/ -o OUT/``: fit every board of a production run, judge each one
-against limits, and write its calibration and a ``summary.csv``.
+"""``triaxcal batch SESSIONS/ --out-dir OUT/``: fit every board of a production run, judge each
+one against limits, and write its calibration and a ``summary.csv``.
 
 Input: a folder of session CSVs (one per board, the file name without ``.csv`` is the board id;
 ``triaxcal capture --out-dir`` names them by serial number), session files given one by one,
@@ -8,9 +8,10 @@ board is fitted exactly as ``triaxcal fit SESSION.csv --poses [options]`` would 
 ``--no-poses`` for tables of points rather than time series), then judged against the limits
 below (``triaxcal.fleet.batch`` documents every check).
 
-Output in OUT/: ``summary.csv`` (one row per board: id, verdict, fail reasons, coefficients,
-RMS, coverage, model ...), and per board ``<id>/calibration.json`` (with the verdict) and, for
-boards that pass, ``<id>/<prefix>_calibration.h`` and ``<id>/<prefix>_calibration_fixed.h``.
+Output in the folder ``--out-dir``: ``summary.csv`` (one row per board: id, verdict, fail
+reasons, coefficients, RMS, coverage, model ...), and per board ``<id>/calibration.json`` (with
+the verdict) and, for boards that pass, ``<id>/<prefix>_calibration.h`` and
+``<id>/<prefix>_calibration_fixed.h``.
 Exit code 1 when any board fails.
 """
 
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CalibrationError
+from ._help import renamed
 
 HELP = "fit and pass/fail many boards at once (production line); write summary.csv"
 
@@ -35,7 +37,7 @@ def _limits_help() -> str:
 
 
 def register(subparsers: Any) -> None:
-    from ..session.fit import add_fit_options
+    from ._fit_options import add_fit_options
 
     p = subparsers.add_parser(
         "batch", help=HELP, description=__doc__,
@@ -44,8 +46,10 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("inputs", nargs="+", metavar="SESSIONS",
                    help="a folder of session CSVs, session files, or one table with --by")
-    p.add_argument("-o", "--output", required=True, metavar="OUT",
+    p.add_argument("--out-dir", required=True, metavar="DIR",
                    help="folder for summary.csv and the boards' files")
+    renamed(p, "-o", "--out-dir")
+    renamed(p, "--output", "--out-dir")
     p.add_argument("--by", metavar="COLUMN", default=None,
                    help="one table of many boards: the column holding the board id "
                         "(e.g. device_id)")
@@ -90,18 +94,18 @@ def _sources(args: argparse.Namespace) -> list[tuple[str, Any]]:
 
 def run(args: argparse.Namespace) -> int:
     from ..fleet.batch import Limits, batch_fit, load_limits, print_counts
+    from ._fit_options import fit_request
 
     limits = load_limits(args.limits) if args.limits else Limits()
     limits = Limits.from_items(args.limit, base=limits)
-    if args.rounds < 0:
-        raise CalibrationError("--rounds must be >= 0")
+    request = fit_request(args)
     sources = _sources(args)
-    results = batch_fit(sources, args=args, limits=limits, out_dir=args.output,
+    results = batch_fit(sources, request=request, limits=limits, out_dir=args.out_dir,
                         prefix=args.prefix, jobs=args.jobs,
                         progress=None if args.quiet else sys.stderr)
     for r in results:
         if not r.passed:
             print(f"FAIL {r.board_id}: {r.message}")
     print_counts(results)
-    print(f"wrote {Path(args.output) / 'summary.csv'}")
+    print(f"wrote {Path(args.out_dir) / 'summary.csv'}")
     return 1 if any(not r.passed for r in results) else 0

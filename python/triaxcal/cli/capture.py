@@ -6,13 +6,14 @@ import argparse
 import sys
 from typing import Any
 
+from ..capture.run import capture, channel_names
+from ..detect.session import POSE_N_COLUMN
 from ..errors import CalibrationError
 from ..io.board_poses import BoardPoseSettings
-from ..io.capture import capture, channel_names
 from ..io.protocol import PROTOCOLS
 from ..io.serial import SerialReader, parse_request_byte
-from ..poses import POSE_N_COLUMN
-from ..session.pose_options import add_pose_options, positive_int, settings_from_args
+from ._help import renamed
+from ._pose_options import add_pose_options, positive_int, settings_from_args
 
 HELP = "record a session CSV from a sensor board on a serial port"
 
@@ -23,8 +24,8 @@ with everything saved. The session CSV has a header 't,<channels>' and one row p
 host time in seconds, then the values as received (counts).
 
 With --board-poses the board finds the poses itself (the triaxcal firmware's mode S: the
-seed's window method, run on the board, with the gyro watching for turns) and sends one mean
-per pose; each becomes a row of the session, with a last column pose_n (samples averaged),
+sphere-centre note's window method, run on the board, with the gyro watching for turns) and sends
+one mean per pose; each becomes a row of the session, with a last column pose_n (samples averaged),
 and beeps its buzzer. The pose-detection options below are sent to the board (in its
 counts: --counts-per-g, default 16384, turns --accel-threshold into counts; --gyro-threshold
 auto is the firmware's 393 counts = 3 deg/s; --rate-hz sets its sample rate, default 100).
@@ -35,12 +36,12 @@ filling the sphere in 3D, the running fit with its standard errors, MotionCal's 
 numbers and the stream's health, with buttons to save, export and send the calibration.
 
 examples:
-  triaxcal capture --port /dev/ttyUSB0 --protocol framed --poses 30 --out s.csv
-  triaxcal capture --port /dev/ttyACM0 --protocol framed --live --out s.csv
+  triaxcal capture --port /dev/ttyUSB0 --protocol framed --poses 30 -o s.csv
+  triaxcal capture --port /dev/ttyACM0 --protocol framed --live -o s.csv
   triaxcal capture --port /dev/ttyACM0 --protocol framed --channels 7 --board-poses \
-      --holdoff 2 --poses 84 --out globe.csv
-  triaxcal capture --port /dev/ttyACM0 --protocol binary --channels 7 --out s.csv
-  triaxcal capture --port COM3 --protocol raw --samples 5000 --out s.csv
+      --holdoff 2 --poses 84 -o globe.csv
+  triaxcal capture --port /dev/ttyACM0 --protocol binary --channels 7 -o s.csv
+  triaxcal capture --port COM3 --protocol raw --samples 5000 -o s.csv
 
 several boards at once (a production rig): one session file per board in --out-dir, named by
 the serial number each board reports (command 'I', answer 'ID:<serial>'), else by its port;
@@ -104,10 +105,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "always 9)")
     p.add_argument("--request-byte", type=_request_byte, default=b"!", metavar="BYTE",
                    help="request byte of polled binary (default 0x21, '!')")
-    p.add_argument("--poll-hz", type=float, default=None, metavar="HZ",
-                   help="polled binary: at most HZ requests per second (default: as fast as "
-                        "the board answers; set it to the sensor's output rate to avoid "
-                        "repeated samples)")
     p.add_argument("--stream", action="store_true",
                    help="binary: the board streams by itself (mode byte B) instead of being "
                         "polled")
@@ -118,7 +115,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       help="stop after N still poses")
     p.add_argument("--seconds", type=float, default=None, metavar="S",
                    help="stop after S seconds")
-    p.add_argument("--out", metavar="SESSION.csv", help="session CSV to write (one port)")
+    p.add_argument("-o", "--output", metavar="SESSION.csv",
+                   help="session CSV to write (one port)")
     p.add_argument("--out-dir", metavar="DIR",
                    help="folder for one session CSV per board, <serial number>.csv (several "
                         "ports)")
@@ -141,7 +139,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-bell", action="store_true", help="do not ring the bell on each pose")
     p.add_argument("--quiet", action="store_true", help="no status line")
     add_pose_options(p)
+    rate = next(a for a in p._actions if "--rate-hz" in a.option_strings)
+    rate.help = ("the board's sample rate: polled binary asks at most HZ times a second (set "
+                 "it to the sensor's output rate to avoid repeated samples; default: as fast "
+                 "as the board answers); --board-poses sets the board's rate to it (default "
+                 "100); the pose detection turns --holdoff into samples with it (default: from "
+                 "the arrival times)")
+    renamed(p, "--poll-hz", "--rate-hz")
+    renamed(p, "--out", "--output")
     add_live_options(p)
+    from .export import add_scale_options
+
+    add_scale_options(p.add_argument_group(
+        "live page's Send: the board driver's scale (the MotionCal packet is in m/s^2, rad/s, "
+        "uT)"))
     p.set_defaults(func=run)
 
 
@@ -172,9 +183,13 @@ def board_settings(args: argparse.Namespace) -> BoardPoseSettings:
     )
 
 
+def poll_interval_s(args: argparse.Namespace) -> float:
+    """Seconds between the requests of polled binary: one sample period at ``--rate-hz`` (0:
+    as fast as the board answers). One rate, whatever the protocol: the board's."""
+    return 1.0 / args.rate_hz if args.rate_hz else 0.0
+
+
 def run(args: argparse.Namespace) -> int:
-    if args.poll_hz is not None and not args.poll_hz > 0:
-        raise CalibrationError(f"--poll-hz must be > 0, got {args.poll_hz}")
     if args.live:
         from ..live.server import check_live_extra
 
@@ -196,14 +211,14 @@ def run(args: argparse.Namespace) -> int:
             "its pose means: drop one of the two")
     if args.live and (args.out_dir is not None or len(args.port) > 1):
         raise CalibrationError(
-            "--live shows one board: capture one --port into --out SESSION.csv with it, or "
+            "--live shows one board: capture one --port into -o SESSION.csv with it, or "
             "drop --live for a capture of several boards")
     if args.out_dir is not None or len(args.port) > 1:
         from ._multicapture import run_many
 
-        return run_many(args, channels)
-    if args.out is None:
-        raise CalibrationError("give --out SESSION.csv (or --out-dir DIR)")
+        return run_many(args, channels, poll_interval_s(args))
+    if args.output is None:
+        raise CalibrationError("give -o SESSION.csv (or --out-dir DIR)")
     port = args.port[0]
     reader = SerialReader(
         port,
@@ -213,7 +228,7 @@ def run(args: argparse.Namespace) -> int:
         stream=args.stream,
         request_byte=args.request_byte,
         switch_mode=not args.no_mode_byte,
-        poll_interval_s=1.0 / args.poll_hz if args.poll_hz else 0.0,
+        poll_interval_s=poll_interval_s(args),
         board_poses=board,
     )
     names = channel_names(args.protocol, channels)
@@ -230,7 +245,7 @@ def run(args: argparse.Namespace) -> int:
                    f"{board.gyro_threshold or 'off'} counts")
         print(
             f"triaxcal capture: {port} at {args.baud} baud, {args.protocol} ({how}), "
-            f"{len(names)} channels ({' '.join(names)}) -> {args.out}; Ctrl-C stops",
+            f"{len(names)} channels ({' '.join(names)}) -> {args.output}; Ctrl-C stops",
             file=out,
         )
     kwargs: dict[str, Any] = {"samples": args.samples, "poses": args.poses,
@@ -241,12 +256,12 @@ def run(args: argparse.Namespace) -> int:
         from ..live.run import live_capture
 
         result = live_capture(
-            reader, args.out, columns=names, mode=mode, detection=detection,
-            options=LiveOptions(detection=detection),
+            reader, args.output, columns=names, mode=mode, detection=detection,
+            options=LiveOptions(detection=detection, **_live_scale(args)),
             host=args.http_host, port=args.http_port, open_browser=not args.no_browser,
             progress=None if args.quiet else out, notices=out, **kwargs)
     else:
-        result = capture(reader, args.out, mode=mode, columns=names, detection=detection,
+        result = capture(reader, args.output, mode=mode, columns=names, detection=detection,
                          progress=None if args.quiet else out, **kwargs)
     st = result.stats
     d = st.decoder
@@ -261,3 +276,12 @@ def run(args: argparse.Namespace) -> int:
         file=out,
     )
     return 0
+
+
+def _live_scale(args: argparse.Namespace) -> dict[str, Any]:
+    from .export import scale_options
+
+    d = scale_options(args)
+    if "sensor_model" in d:
+        d["sensor_model"] = tuple(d["sensor_model"])
+    return d

@@ -1,6 +1,6 @@
 """``triaxcal diff OLD.json NEW.json`` (or ``triaxcal diff CAL.json``: the calibration against
 the one it replaced): per coefficient the change, the change in standard errors, and a verdict
--- the same calibration, a real change, or a suspicious one (see :mod:`triaxcal.compare`).
+-- the same calibration, a real change, or a suspicious one (see :mod:`triaxcal.calibration.diff`).
 
 Exit code, for production scripts: 0 when every change is within ``--threshold`` standard
 errors, 3 for a real change, 4 for a suspicious one (1 for an error such as a missing file).
@@ -13,8 +13,9 @@ import json
 import sys
 from typing import Any
 
-from ..calibration import SENSORS, Calibration
-from ..compare import compare, compare_with_previous
+from ..calibration.diff import compare, compare_with_previous
+from ..calibration.file import SENSORS, Calibration
+from ._help import renamed
 
 
 def register(subparsers: Any) -> None:
@@ -36,7 +37,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--max-offset-change", type=float, default=0.25,
                    help="an offset moving by more than this fraction of the radius is "
                         "suspicious (0.25)")
-    p.add_argument("--json", action="store_true", help="print the comparison as JSON")
+    p.add_argument("--format", choices=("text", "json"), default="text",
+                   help="print the comparison as text or as JSON")
+    renamed(p, "--json", "--format json")
     p.set_defaults(func=run)
 
 
@@ -49,5 +52,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         old, new = Calibration.load(args.old), Calibration.load(args.new)
         d = compare(old, new, sensors=sensors, **kw)
-    sys.stdout.write((json.dumps(d.to_dict(), indent=2) if args.json else d.text()) + "\n")
+    text = json.dumps(d.to_dict(), indent=2) if args.format == "json" else d.text()
+    sys.stdout.write(text + "\n")
     return d.exit_code

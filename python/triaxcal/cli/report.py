@@ -1,4 +1,5 @@
-"""``triaxcal report SESSION.csv|LOG|CAL.json [--plot FIG.png]``: how good is a calibration?
+"""``triaxcal report SESSION.csv|LOG|CAL.json [--plot FIG.png] [-o REPORT.json]``: how good is a
+calibration?
 
 With a session / data file: fit it as ``triaxcal fit`` would (same options) and report. With a
 calibration file: report each part on its input data -- the file named in the calibration
@@ -13,22 +14,30 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.flight import flight_source
+from ..calibration.gate import check_part
+from ..calibration.part import SensorCalibration
+from ..calibration.request import FitRequest, SourceOptions
+from ..calibration.session import fit_session
+from ..calibration.source import load_source
+from ..detect.session import pose_points, stored_settings
 from ..errors import CalibrationError
-from ..fit import MODELS
+from ..fit.ellipsoid import MODELS
 from ..io.files import check_output, write_file
 from ..io.logs import is_log
+from ..io.sections import tilt_points
 from ..io.tables import pick_columns, read_table
-from ..poses import pose_points
-from ..report import QualityReport, context_lines, plot_report, quality_report
-from ..session.fit import add_fit_options, fit_file
-from ..session.pose_options import apply_settings, stored_settings
-from ..session.source import load_source
+from ..report import QualityReport, plot_report, quality_report
+from ..report.flight import flight_check, flight_text, plot_flight
+from ..report.text import coefficient_table, printable, stored_text, summary_only, summary_text
 from ._calfile import file_sha256
-from ._method_parts import summary_only, summary_text, tilt_points
+from ._fit_options import add_field_options, add_fit_options, fit_request
+from ._help import renamed
 
 
 def register(subparsers: Any) -> None:
@@ -46,9 +55,11 @@ def register(subparsers: Any) -> None:
                         "several sensors, the sensor name is added before .png")
     p.add_argument("--data", dest="data_file", default=None, metavar="FILE",
                    help="with CAL.json: the readings to judge it on")
-    p.add_argument("--json", dest="json_out", default=None, metavar="REPORT.json",
+    p.add_argument("-o", "--output", dest="json_out", default=None, metavar="REPORT.json",
                    help="also write the numbers as JSON")
+    renamed(p, "--json", "--output")
     add_fit_options(p)
+    add_field_options(p)
     p.set_defaults(func=run)
 
 
@@ -73,42 +84,24 @@ def _find_source(cal_path: Path, part: SensorCalibration) -> Path | None:
     return None
 
 
-def _stored_text(sensor: str, part: SensorCalibration) -> str:
-    s = part.stats
-    lines = [(f"{sensor} calibration ({part.raw_unit} -> {part.unit}, model {part.model}): "
-             "statistics stored at fit time (pass --data FILE for the full report and figure)")]
-    if "rms" in s:
-        lines.append(f"  residual RMS    {s['rms']:.4g} {part.unit} "
-                     f"({s.get('rms_pct_of_radius', float('nan')):.3g} % of radius)")
-    if "norms" in s:
-        n = s["norms"]
-        lines.append(f"  calibrated |v|  min {n['min']:.6g}  max {n['max']:.6g}  mean "
-                     f"{n['mean']:.6g}  std {n['std']:.4g} {part.unit}")
-    if s.get("coverage_pct") is not None:
-        lines.append(f"  coverage        {s['coverage_pct']:.0f} % of the sphere")
-    if s.get("rejected") is not None:
-        lines.append(f"  outliers        {len(s['rejected'])} rejected")
-    lines += context_lines(part)
-    for w in s.get("warnings", []):
-        lines.append(f"    - {w}")
-    return "\n".join(lines)
-
-
 def _log_report(src: Path, part: SensorCalibration, sensor: str,
                 args: argparse.Namespace) -> tuple[QualityReport, Any]:
     """Report ``part`` on the log it was fitted from, read with the options it was read with
     (``stats["log"]``) unless given again on the command line."""
     log = part.stats.get("log") or {}
-    same = argparse.Namespace(**vars(args))
-    if same.instance is None:
-        same.instance = log.get("instance")
-    if not same.topic and log.get("topic"):
-        same.topic = list(log["topic"])
-    same.undo_autopilot_cal = args.undo_autopilot_cal or bool(log.get("undo_autopilot_cal"))
-    same.poses = bool(part.stats.get("poses")) or args.poses
-    if part.stats.get("poses"):  # the poses it was fitted on, found with its stored settings
-        apply_settings(same, stored_settings(part.stats))
-    data = load_source(src, sensor, same)
+    given = fit_request(args, sensor=sensor).source
+    topics = given.topics or (tuple(log["topic"]) if log.get("topic") else None)
+    options = replace(
+        given,
+        instance=given.instance if given.instance is not None else log.get("instance"),
+        topics=topics,
+        undo_autopilot_cal=given.undo_autopilot_cal or bool(log.get("undo_autopilot_cal")),
+        poses=bool(part.stats.get("poses")) or given.poses,
+        # the poses it was fitted on, found with its stored settings
+        detection=(stored_settings(part.stats) if part.stats.get("poses")
+                   else given.detection),
+    )
+    data = load_source(src, sensor, options)
     if args.data_file is None and part.input_sha256 not in (None, data.sha256):
         raise CalibrationError(
             f"{src} has changed since the calibration was made (SHA-256 differs): pass "
@@ -139,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.json_out, "report")
     skip = getattr(args, "skip_bad_lines", False)
     reports: dict[str, QualityReport] = {}
+    numbers: dict[str, Any] = {}
     if _is_calibration(path):
         if getattr(args, "bootstrap", 0):
             raise CalibrationError(
@@ -149,14 +143,17 @@ def run(args: argparse.Namespace) -> int:
         sensors = [args.sensor] if args.sensor else list(cal.sensors)
         for sensor in sensors:
             part = cal.part(sensor)
+            if part.model == "attitude":  # a compass calibrated from a flight
+                _attitude_report(path, part, sensor, args, len(sensors) > 1, numbers)
+                continue
             src = Path(args.data_file) if args.data_file else _find_source(path, part)
             if src is not None and part.model not in MODELS:
-                print(_stored_text(sensor, part).replace(
-                    "(pass --data FILE for the full report and figure)",
-                    f"(model {part.model!r} is not a fit to a sphere: no figure)"))
+                print(stored_text(sensor, part,
+                                  f"model {part.model!r} is not a fit to a sphere: no figure"))
                 continue
             if src is None:
-                print(_stored_text(sensor, part))
+                print(stored_text(sensor, part,
+                                  "pass --data FILE for the full report and figure"))
                 if args.plot:
                     print(f"  (no figure for {sensor}: its data file {part.source!r} was not "
                           "found; pass --data FILE)", file=sys.stderr)
@@ -174,7 +171,8 @@ def run(args: argparse.Namespace) -> int:
                     print(f"  figure: {out}")
                 continue
             if part.stats.get("method") == "tilt-rig":
-                pts, sha = tilt_points(src, part), file_sha256(src)
+                pts = tilt_points(src, part.stats.get("columns", [0, 1, 2]))
+                sha = file_sha256(src)
             else:
                 table = read_table(src, skip_bad_lines=skip)
                 for n in table.notes:
@@ -204,9 +202,12 @@ def run(args: argparse.Namespace) -> int:
                                   report=rep)
                 print(f"  figure: {out}")
     else:
-        res = fit_file(args)
+        res = fit_session(args.data, fit_request(args))
         for n in res.notes:
             print(f"  {n}", file=sys.stderr)
+        if res.flight is not None:
+            _print_flight(res.part, res.flight, res.sensor, args, False, numbers)
+            return _write_json(args, reports, numbers)
         rep = quality_report(res.points, res.part, sensor=res.sensor,
                              rejected=res.rejected.tolist(), model_reason=res.reason)
         reports[res.sensor] = rep
@@ -214,9 +215,59 @@ def run(args: argparse.Namespace) -> int:
         if args.plot:
             out = plot_report(res.points, res.part, args.plot, report=rep)
             print(f"  figure: {out}")
+    return _write_json(args, reports, numbers)
+
+
+def _write_json(args: argparse.Namespace, reports: dict[str, QualityReport],
+                numbers: dict[str, Any]) -> int:
     if args.json_out:
-        write_file(args.json_out,
-                   json.dumps({k: r.to_dict() for k, r in reports.items()}, indent=2) + "\n",
-                   what="report")
+        out = {**{k: r.to_dict() for k, r in reports.items()}, **numbers}
+        write_file(args.json_out, json.dumps(out, indent=2) + "\n", what="report")
         print(f"  numbers: {args.json_out}")
     return 0
+
+
+def _attitude_report(cal_path: Path, part: SensorCalibration, sensor: str,
+                     args: argparse.Namespace, many: bool, numbers: dict[str, Any]) -> None:
+    """A compass calibrated from a flight (``--method attitude``): its held-out check,
+    recomputed on the log it was fitted on (found by the part's source path and checked by its
+    SHA-256, or given with ``--data``)."""
+    src = Path(args.data_file) if args.data_file else _find_source(cal_path, part)
+    if src is None:
+        print(stored_text(sensor, part, "pass --data LOG for the held-out check and figure"))
+        if args.plot:
+            print(f"  (no figure for {sensor}: its flight log {printable(part.source)!r} was "
+                  "not found; pass --data LOG)", file=sys.stderr)
+        return
+    if args.data_file is None and part.input_sha256 not in (None, file_sha256(src)):
+        raise CalibrationError(
+            f"{src} has changed since the calibration was made (SHA-256 differs): pass "
+            "--data FILE explicitly to judge the calibration on it anyway")
+    log = part.stats.get("log") or {}
+    inst = log.get("instance")
+    request = FitRequest(sensor="mag", method="attitude",
+                         source=SourceOptions(instance=inst if isinstance(inst, int) else None))
+    _print_flight(part, flight_source(src, request), sensor, args, many, numbers)
+
+
+def _print_flight(part: SensorCalibration, src: Any, sensor: str, args: argparse.Namespace,
+                  many: bool, numbers: dict[str, Any]) -> None:
+    print("\n".join(coefficient_table(part, sensor)))
+    inter = part.stats.get("interference")
+    if isinstance(inter, dict):
+        per = "A" if inter.get("per") == "A" else "unit of throttle"
+        print("  interference  " + "  ".join(f"{float(v):.4g}" for v in inter["vector"])
+              + f"  {part.unit} per {per}, ADDED after the matrix "
+              f"({printable(inter.get('source'))})")
+    verdict = check_part(part, sensor)
+    print("  " + verdict.text("this flight calibration"))
+    try:
+        check = flight_check(part, src)
+    except CalibrationError as exc:  # e.g. the fit on one half failed: nothing to draw
+        print(f"  (no held-out check: {exc})")
+        return
+    print(flight_text(part, check, sensor))
+    numbers[sensor] = check.to_dict()
+    if args.plot:
+        out = plot_flight(part, check, _plot_path(args.plot, sensor, many))
+        print(f"  figure: {out}")

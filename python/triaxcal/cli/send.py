@@ -4,6 +4,10 @@ The board (Adafruit_Sensor_Calibration sketches, the project firmware, ``triaxca
 answers a packet with a valid CRC with ``Cal1:`` and ``Cal2:`` lines; ``send`` reads them back
 and checks every value against what it sent (4 decimals). Without an answer within
 ``--timeout`` seconds, or with different values, it fails with a message saying what to check.
+
+A calibration the validity gate refuses is not sent (exit 2) unless ``--force``. The packet is
+in the driver's units (m/s^2, rad/s, uT): a part in raw counts needs the board driver's scale,
+``--counts-per-unit SENSOR=COUNTS[:UNIT]`` or ``--sensor-model PART``; none is assumed.
 """
 
 from __future__ import annotations
@@ -12,10 +16,10 @@ import argparse
 import time
 from typing import Any
 
-from ..calibration import Calibration
+from ..calibration.file import Calibration
 from ..errors import CalibrationError
 from ..export import echo_matches, motioncal_losses, motioncal_packet, parse_motioncal_echo
-from .export import _scale
+from .export import add_scale_options, scale_options
 
 
 def send_packet(port: str, packet: bytes, *, baud: int = 115200,
@@ -82,10 +86,10 @@ def register(subparsers: Any) -> None:
                    help="baud rate of the board's serial port (default 115200)")
     p.add_argument("--timeout", type=float, default=3.0,
                    help="seconds to wait for the echo (default 3)")
-    p.add_argument("--counts-per-unit", type=_scale, action="append", default=[],
-                   metavar="SENSOR=COUNTS[:UNIT]",
-                   help="the board driver's scale (default accel=16384:g, gyro=131:deg/s, "
-                        "mag=10:uT)")
+    add_scale_options(p)
+    p.add_argument("--force", action="store_true",
+                   help="send a calibration the validity gate refuses (the board cannot be "
+                        "told: it applies it like any other)")
     p.add_argument("--offsets-only", action="store_true",
                    help="accept that the packet carries the accelerometer's and gyroscope's "
                         "offsets but not their gains or any temperature terms (without it such "
@@ -94,11 +98,16 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..export._trust import mark_lines, prepare
+
     cal = Calibration.load(args.calibration)
-    cpu = dict(args.counts_per_unit) or None
-    packet = motioncal_packet(cal, counts_per_unit=cpu, offsets_only=args.offsets_only)
-    for lost in motioncal_losses(cal, counts_per_unit=cpu):
+    scale = scale_options(args)
+    prep = prepare(cal, fmt="a MotionCal packet", force=args.force, action="send")
+    packet = motioncal_packet(cal, offsets_only=args.offsets_only, force=args.force, **scale)
+    for lost in motioncal_losses(cal, **scale):
         print(f"  not in the packet: {lost}")
+    for line in mark_lines(prep.invalid):
+        print(f"  {line}")
     cal1, cal2 = send_packet(args.port, packet, baud=args.baud, timeout=args.timeout)
     print(f"sent {len(packet)}-byte MotionCal packet to {args.port}; the board confirmed it")
     print("  Cal1: " + ", ".join(f"{v:.4f}" for v in cal1))

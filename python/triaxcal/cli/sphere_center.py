@@ -1,7 +1,7 @@
 """triaxcal sphere-center FILE --radius R [--method descent|grid|fit]: the zero offset as
-the centre of a sphere of known radius (sphere-center-descent.txt).
+the centre of a sphere of known radius (the sphere-centre method).
 
-The seed's readings lie on a sphere of radius R (16384 counts = 1 g for a 16-bit +-2 g
+Still readings lie on a sphere of radius R (16384 counts = 1 g for a 16-bit +-2 g
 accelerometer) around the unknown offset. descent is its variable-step 26-neighbour
 search: from --start (0,0,0), move to the neighbour one --step (1000) away that lowers
 the error sum  sum |(x-A)^2 + (y-B)^2 + (z-C)^2 - R^2|, else divide the step by --shrink
@@ -26,18 +26,18 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_center
+from ..calibration.request import parse_radius
+from ..detect.session import pose_points
 from ..errors import CalibrationError
-from ..fit import descend_center, fit_sphere, grid_center, sphere_error
+from ..fit.center import CENTER_METHODS, sphere_center
+from ..fit.ellipsoid import sphere_error
 from ..io.tables import pick_columns, read_table
-from ..parts import part_from_center
-from ..poses import pose_points
-from ..session.fit import parse_radius
-from ..session.pose_options import add_pose_options, settings_from_args
-from ._calfile import add_output_options, file_sha256, save_part
+from ._calfile import add_output_options, save_part
+from ._pose_options import add_pose_options, positive_float, settings_from_args
 
-HELP = "zero offset as the centre of a sphere of known radius (the seed's descent)"
+HELP = "zero offset as the centre of a sphere of known radius (variable-step descent)"
 
-METHODS = ("descent", "grid", "fit")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,19 +49,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--radius", required=True, metavar="R",
                    help="the sphere's radius in the readings' raw units (16384 counts = 1 g at "
                         "+-2 g, 16 bit)")
-    p.add_argument("--method", choices=METHODS, default="descent",
-                   help="descent (the seed's variable-step search, default), grid (its cube "
-                        "search), fit (least squares for the centre)")
-    p.add_argument("--step", type=float, default=None, metavar="S",
+    p.add_argument("--method", choices=CENTER_METHODS, default="descent",
+                   help="descent (the sphere-centre method's variable-step search, default), "
+                        "grid (its cube search), fit (least squares for the centre)")
+    p.add_argument("--step", type=positive_float, default=None, metavar="S",
                    help="descent: first step (default 1000); grid: node spacing (default "
                         "half-width / 20)")
-    p.add_argument("--min-step", type=float, default=0.01, metavar="S",
+    p.add_argument("--min-step", type=positive_float, default=0.01, metavar="S",
                    help="descent, grid: stop when the step falls below this (default 0.01)")
     p.add_argument("--shrink", type=float, default=10.0, metavar="F",
                    help="descent: divide the step by F when no neighbour is better (default 10)")
     p.add_argument("--start", default="0,0,0", metavar="X,Y,Z",
-                   help="descent: start point, raw units (default 0,0,0, the seed's)")
-    p.add_argument("--half-width", type=float, default=None, metavar="W",
+                   help="descent: start point, raw units (default 0,0,0, as the sphere-centre "
+                        "method starts)")
+    p.add_argument("--half-width", type=positive_float, default=None, metavar="W",
                    help="grid: search the cube mean +- W (default R / 10)")
     p.add_argument("--no-refine", action="store_true",
                    help="grid: one pass at --step; by default the search is repeated around "
@@ -120,49 +121,6 @@ def _scale_to(text: str | None, sensor: str) -> tuple[float, str] | None:
     return value, unit
 
 
-def centre(pts: np.ndarray, r: float, args: Any) -> tuple[np.ndarray, dict[str, Any]]:
-    """The centre by ``args.method``, and what to record about the search."""
-    if args.method == "descent":
-        step = 1000.0 if args.step is None else float(args.step)
-        d = descend_center(pts, r, start=_vector(args.start, "--start"), step=step,
-                           min_step=float(args.min_step), shrink=float(args.shrink))
-        if not d.converged:
-            raise CalibrationError(
-                f"the descent did not converge in {d.iterations} steps (step now {d.step:g}): "
-                "start nearer (--start), or take a larger --min-step"
-            )
-        return np.asarray(d.center), {"iterations": d.iterations, "evaluations": d.evaluations,
-                                      "step": step, "min_step": float(args.min_step),
-                                      "shrink": float(args.shrink)}
-    if args.method == "grid":
-        hw = r / 10.0 if args.half_width is None else float(args.half_width)
-        if not (math.isfinite(hw) and hw > 0):
-            raise CalibrationError(f"--half-width must be > 0, got {args.half_width}")
-        step = hw / 20.0 if args.step is None else float(args.step)
-        min_step = float(args.min_step)
-        if not (math.isfinite(step) and step > 0 and math.isfinite(min_step) and min_step > 0):
-            raise CalibrationError("--step and --min-step must be > 0")
-        mid = pts.mean(axis=0)
-        c, half = mid, hw
-        evaluations = passes = 0
-        while True:  # the cube search, then again around its best node, 20 times finer
-            d = grid_center(pts, r, lo=c - half, hi=c + half, step=step)
-            c = np.asarray(d.center)
-            evaluations += d.evaluations
-            passes += 1
-            if args.no_refine or step <= min_step:
-                break
-            half, step = step, max(step / 20.0, min_step)
-        return c, {"iterations": passes, "evaluations": evaluations, "step": step,
-                   "half_width": hw, "grid_center": mid.tolist()}
-    f = fit_sphere(pts, radius=r, scale="fixed")  # the centre only, |p - c| = R
-    if not f.converged:
-        raise CalibrationError("the fixed-radius sphere fit did not converge: try --method "
-                               "descent")
-    return np.asarray(f.offset), {"iterations": f.iterations, "stderr": {
-        name: float(v) for name, v in zip(f.param_names[:3], f.stderr[:3])}}
-
-
 def run(args: argparse.Namespace) -> int:
     table = read_table(args.data)
     cols = pick_columns(table, args.columns, args.sensor)
@@ -175,7 +133,10 @@ def run(args: argparse.Namespace) -> int:
     if len(pts) < 4:
         raise CalibrationError(f"{len(pts)} readings: a centre needs at least 4 (better 10+)")
     r = _raw_radius(args.radius, args.raw_unit)
-    c, info = centre(pts, r, args)
+    found = sphere_center(pts, r, method=args.method, step=args.step, min_step=args.min_step,
+                          shrink=args.shrink, start=_vector(args.start, "--start"),
+                          half_width=args.half_width, refine=not args.no_refine)
+    c, info = found.center, found.info
     resid = np.linalg.norm(pts - c, axis=1) - r
     rms = float(np.sqrt(np.mean(resid**2)))
     err = sphere_error(pts, c, r)
@@ -185,7 +146,8 @@ def run(args: argparse.Namespace) -> int:
     part = part_from_center(c, r, raw_unit=args.raw_unit, method=args.method,
                             unit=None if scale is None else scale[1],
                             scale_to=None if scale is None else scale[0], stats=stats,
-                            source=str(table.path), input_sha256=file_sha256(table.path))
+                            source=str(table.path), input_sha256=table.sha256,
+                            force=args.force)
     verb = save_part(args, args.sensor, part)
     u = args.raw_unit
     mean = pts.mean(axis=0)

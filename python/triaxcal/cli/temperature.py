@@ -1,9 +1,9 @@
 """triaxcal temperature SESSION --sensor gyro --degree 1: the gyroscope's bias as a
-polynomial in the temperature change (gyro-integration-calibration.txt).
+polynomial in the temperature change (the turn-integration method).
 
 Cool the board down, then record it lying still while it comes back to room temperature (or
 warm it up). The bias of every axis is fitted by least squares as
-offset(T) = offset + sum_k c_k (T - T_ref)^k, degree 1 being the seed's linear
+offset(T) = offset + sum_k c_k (T - T_ref)^k, degree 1 being the turn-integration method's linear
 tempcomp: calibrated = (raw - (tempcomp * dT + offset)) / gain. Only the samples of still
 poses are used (the pose detection of triaxcal fit --poses), so a bump does not spoil it.
 
@@ -24,15 +24,16 @@ from typing import Any
 
 import numpy as np
 
+from ..calibration.parts import part_from_temperature
+from ..detect.session import session_poses
 from ..errors import CalibrationError
 from ..io.tables import pick_columns, read_table
 from ..methods.temperature import fit_temperature
-from ..parts import part_from_temperature
-from ..poses import session_poses
-from ..session.pose_options import add_pose_options, settings_from_args
 from ._calfile import add_output_options, existing_part, file_sha256, save_part
+from ._pose_options import add_pose_options, settings_from_args
 
-HELP = "gyro bias against temperature (the seed's linear trend; degree 1 to 3)"
+HELP = ("gyro bias against temperature (the turn-integration method's linear trend; degree "
+        "1 to 3)")
 
 #: The MPU-6050's temperature sensor: deg C = raw / 340 + 36.53 (register map, TEMP_OUT).
 MPU6050_TEMP = (1.0 / 340.0, 36.53)
@@ -63,10 +64,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--sensor", choices=("gyro",), default="gyro",
                    help="the sensor whose bias drifts (gyro: its true reading at rest is zero)")
     p.add_argument("--degree", type=int, choices=(1, 2, 3), default=1,
-                   help="polynomial degree (1: the seed's linear trend, default)")
+                   help="polynomial degree (1: the linear trend of the turn-integration method, "
+                        "default)")
     p.add_argument("--reference", type=float, default=None, metavar="DEGC",
                    help="reference temperature T_ref, deg C (default: the first reading's, the "
-                        "seed's 'since start')")
+                        "original method's 'since start')")
     p.add_argument("--columns", default=None,
                    help="the sensor's three columns (default gx,gy,gz by name)")
     p.add_argument("--temp-column", default=None, metavar="NAME",
@@ -130,7 +132,8 @@ def run(args: argparse.Namespace) -> int:
     base = existing_part(args.output, args.sensor, args.new)
     part = part_from_temperature(model, base, raw_unit=args.raw_unit,
                                  stats={"temperature_column": how, "rows_used": len(rows)},
-                                 source=str(table.path), input_sha256=file_sha256(table.path))
+                                 source=str(table.path), input_sha256=file_sha256(table.path),
+                                force=args.force)
     u = args.raw_unit
     out = sys.stdout
     print(f"{args.sensor} bias against temperature, degree {model.degree}, from {used}; "

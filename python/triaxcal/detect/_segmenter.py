@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_samples
+from .._checks.arrays import as_samples
 from ..errors import CalibrationError
 
 TOO_SHORT = "too short"

@@ -1,5 +1,5 @@
-"""Still poses: :func:`detect_poses` (offline) and :class:`PoseDetector` (online), the seed's
-window method on every sensor of the board."""
+"""Still poses: :func:`detect_poses` (offline) and :class:`PoseDetector` (online), the
+sphere-centre method's window rule on every sensor of the board."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
+from .._checks import options as opt
 from ..errors import CalibrationError
 from ._segmenter import Pose, PoseDetection, Rejection, _as_samples, _Segmenter
 
@@ -103,7 +103,8 @@ def detect_poses(
     mag_threshold: float | None = None,
     holdoff_samples: int = 0,
 ) -> PoseDetection:
-    """Find still poses by the seed's window-average method, with every sensor (offline).
+    """Find still poses by the sphere-centre note's window-average method, with every sensor "
+    "(offline).
 
     Parameters
     ----------
@@ -116,7 +117,7 @@ def detect_poses(
     threshold : float, optional
         Largest change of any accelerometer axis of the window mean, from one window to the
         next, for the board to count as still, in the input's units. ``None``:
-        ``0.07 * units_per_g`` (the seed's 0.07 g).
+        ``0.07 * units_per_g`` (the original method's 0.07 g).
     units_per_g : float
         Accelerometer units per g: 1 for g, 9.80665 for m/s^2, 16384 for counts at +-2 g.
     min_separation : float, optional
@@ -126,13 +127,14 @@ def detect_poses(
         is rejected as "too close to an earlier pose". ``None``: ``threshold``; 0 disables
         the check.
     min_windows : int
-        Fewest windows a still run needs (2 = one steady comparison, the seed's rule);
+        Fewest windows a still run needs (2 = one steady comparison, the original method's rule);
         shorter runs are rejected as "too short".
     max_std : float, optional
         Largest standard deviation of any accelerometer axis about the run's mean (noise
         plus slow drift); noisier runs are rejected as "too noisy". ``None``: ``threshold``.
     max_windows : int, optional
-        Decide on a run as soon as it has this many windows (the seed's beep: the pose is
+        Decide on a run as soon as it has this many windows (the sphere-centre note's beep: the
+        pose is
         registered, or rejected, on those windows' mean, and :meth:`PoseDetector.update` returns
         it then); a registered pose goes on averaging until the board moves, and
         :attr:`PoseDetection.poses` hold the whole run's mean. ``None``: decide when the motion
@@ -153,7 +155,7 @@ def detect_poses(
     mag_threshold : float, optional
         In the magnetometer's input units. ``None``: learnt from its noise, as for the gyro.
     holdoff_samples : int
-        Samples ignored after each registered pose before a new run can start (the seed's
+        Samples ignored after each registered pose before a new run can start (the original method's
         2-second pause after its beep: ``2 * rate_hz``). 0: none.
 
     Returns

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
+from .._checks import options as opt
 from ..errors import CalibrationError
 from ._segmenter import TOO_SHORT, Rejection, _as_samples
 

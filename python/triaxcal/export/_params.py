@@ -12,17 +12,19 @@ own scale, ``unit == raw_unit``).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..conventions.units import per_unit, unit_factor
 from ..errors import CalibrationError
-from ..units import DEVICE_COUNTS_PER_UNIT, per_unit, unit_factor
+from ._trust import Scales
 
-__all__ = ["Physical", "f32", "physical", "pick_sensors"]
+__all__ = ["Physical", "f32", "interference", "physical", "pick_sensors"]
 
 _FLOAT32_MAX = 3.4028234663852886e38
 
@@ -45,6 +47,8 @@ class Physical:
     temp_range_c: tuple[float, float] | None = None
     offset_poly: np.ndarray | None = None
     gain_poly: np.ndarray | None = None
+    scale_source: str | None = None
+    composed: bool = False
 
     def apply(self, raw: Any, temperature: Any = None) -> np.ndarray:
         d = np.asarray(raw, float) - self.offset
@@ -58,21 +62,15 @@ class Physical:
 
 
 def physical(part: SensorCalibration, sensor: str, raw_unit: str, unit: str,
-             counts_per_unit: Mapping[str, Any] | None = None, *, fmt: str) -> Physical:
+             scales: Scales | None = None, *, fmt: str) -> Physical:
     """``part`` converted to a consumer whose raw readings are in ``raw_unit`` and whose
-    calibrated readings are in ``unit`` (see the module docstring)."""
+    calibrated readings are in ``unit`` (see the module docstring). A part in raw counts takes
+    the driver's scale from ``scales`` (refused without one: no scale is assumed)."""
+    source = None
     if part.raw_unit == "counts":
-        spec = (counts_per_unit or {}).get(sensor, DEVICE_COUNTS_PER_UNIT[sensor])
-        if isinstance(spec, (int, float)):
-            spec = (float(spec), DEVICE_COUNTS_PER_UNIT[sensor][1])
-        try:
-            cpu, cpu_unit = float(spec[0]), str(spec[1])
-        except (TypeError, ValueError, IndexError):
-            raise CalibrationError(f"counts per unit for {sensor} must be (number, unit), "
-                                   f"got {spec!r}") from None
-        if not (math.isfinite(cpu) and cpu > 0):
-            raise CalibrationError(f"counts per unit for {sensor} must be positive, got {cpu}")
-        k = unit_factor(cpu_unit, raw_unit) / cpu
+        sc = (scales or Scales()).get(sensor, fmt, raw_unit)
+        k = unit_factor(sc.unit, raw_unit) / sc.counts_per_unit
+        source = sc.source
     else:
         k = _factor(part.raw_unit, raw_unit, sensor, fmt, "raw")
     c = k if part.unit == part.raw_unit else _factor(part.unit, unit, sensor, fmt, "calibrated")
@@ -89,7 +87,22 @@ def physical(part: SensorCalibration, sensor: str, raw_unit: str, unit: str,
         temp_range_c=None if t is None else t.temp_range_c,
         offset_poly=None if t is None else np.asarray(t.offset_poly) * k,
         gain_poly=None if t is None or t.gain_poly is None else np.asarray(t.gain_poly),
+        scale_source=source,
+        composed=bool(part.stats.get("composed_with_autopilot")),
     )
+
+
+def interference(part: SensorCalibration) -> tuple[str, np.ndarray] | None:
+    """A part's interference term: ``(per, vector)`` -- ``per`` ``"A"`` (battery current) or
+    ``"throttle"`` (0..1), ``vector`` the field in ``part.unit`` ADDED after the matrix per unit
+    of it (:mod:`triaxcal.methods.attitude`) -- or None."""
+    inter = part.stats.get("interference")
+    if not isinstance(inter, dict):
+        return None
+    if inter.get("unit") != part.unit:
+        raise CalibrationError(f"the interference term is in {inter.get('unit')!r} but the part "
+                               f"is in {part.unit!r}: the file was edited; fit again")
+    return str(inter["per"]), np.asarray(inter["vector"], dtype=float)
 
 
 def _factor(src: str, dst: str, sensor: str, fmt: str, what: str) -> float:
@@ -99,7 +112,7 @@ def _factor(src: str, dst: str, sensor: str, fmt: str, what: str) -> float:
         raise CalibrationError(
             f"{fmt} needs the {sensor} {what} readings in {dst}, but this calibration's {what} "
             f"unit is {src!r}, which cannot be converted to it; refit with readings in a "
-            "physical unit (or counts with --counts-per-unit)"
+            "physical unit (or in raw counts, exported with the driver's scale)"
         ) from None
 
 
@@ -121,11 +134,21 @@ def pick_sensors(cal: Calibration, sensors: Iterable[str] | None, supported: tup
     return chosen
 
 
+_COMPOSED = ("; this part is a correction fitted on readings the autopilot had already "
+             "corrected, and the stored calibration followed by the correction has a form "
+             "the parameters cannot hold: fit the raw sensor instead (--undo-autopilot-cal; "
+             "undo_autopilot_cal=True)")
+
+
 def require_diagonal(p: Physical, fmt: str, what: str, *, rel: float = 1e-9) -> np.ndarray:
     """The diagonal of ``p.matrix``; refuses any off-diagonal term a per-axis format drops."""
     m = p.matrix
     off = np.abs(m - np.diag(np.diag(m))).max()
     if off > rel * np.abs(np.diag(m)).max():
+        if p.composed:
+            raise CalibrationError(
+                f"{fmt} stores only per-axis {p.sensor} scales ({what}); the composed "
+                f"calibration has cross-axis terms up to {off:.3g}" + _COMPOSED)
         raise CalibrationError(
             f"{fmt} stores only per-axis {p.sensor} scales ({what}); this calibration has "
             f"cross-axis terms up to {off:.3g} {per_unit(p.unit, p.raw_unit)} that it would drop: "
@@ -149,6 +172,11 @@ def require_symmetric(p: Physical, fmt: str, *, rel: float = 1e-12) -> None:
     m = p.matrix
     asym = np.abs(m - m.T).max()
     if asym > rel * np.abs(m).max():
+        if p.composed:
+            raise CalibrationError(
+                f"{fmt} stores a symmetric {p.sensor} matrix; the composed calibration's "
+                f"matrix (the stored one times the fitted correction) is not symmetric (differs "
+                f"by {asym:.3g})" + _COMPOSED)
         raise CalibrationError(
             f"{fmt} stores a symmetric {p.sensor} matrix (one value per off-diagonal pair); "
             f"this calibration's matrix is not symmetric (differs by {asym:.3g}): refit with "
@@ -209,8 +237,8 @@ def mag_mounting(cal: Calibration, fmt: str, param: str) -> Any:
     is left out."""
     import warnings
 
+    from ..conventions.rotations import mounting, nearest_mounting
     from ..methods.alignment import AlignmentWarning
-    from ..rotations import mounting, nearest_mounting
 
     part = cal.mag
     if part is None or part.alignment is None:

@@ -7,8 +7,9 @@ Model: ``out = matrix * (raw - offset)`` (the matrix **multiplies**), with the p
 
 from __future__ import annotations
 
-from ..calibration import Calibration, SensorCalibration
-from ..units import per_unit
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..conventions.units import per_unit
 from ._cgen import (
     _AX,
     _OFFD,
@@ -24,12 +25,14 @@ from ._cgen import (
     _test_raw,
     _vec,
     _wrap_header,
+    check_float_range,
 )
+from ._trust import mark_lines, prepare
 
 __all__ = ["c_header"]
 
 
-def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
+def c_header(cal: Calibration, *, prefix: str = "triaxcal", force: bool = False) -> str:
     """C99 header with the calibration as float constants and inline apply functions.
 
     For each part ``<sensor>`` of ``cal``: macros ``<PREFIX>_<SENSOR>_OFFSET_X..Z`` (raw
@@ -49,6 +52,14 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
     cal : Calibration
     prefix : str
         C identifier prefix (``"imu"`` gives ``IMU_ACCEL_OFFSET_X`` and ``imu_accel_apply``).
+    force : bool
+        Write parts the validity gate refuses
+        (:func:`triaxcal.calibration.gate.require_valid`); the header then says so at the top
+        and defines ``<PREFIX>_CALIBRATION_NOT_VALID``.
+
+    A part fitted on readings an autopilot had already corrected is written as the composed
+    absolute calibration (:mod:`triaxcal.export._trust`); a coefficient beyond a float's
+    range is refused.
 
     Returns
     -------
@@ -58,9 +69,12 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
     p = _ident(prefix)
     P = p.upper()
     guard = _guard(p, "CALIBRATION")
-    comment: list[str] = []
+    prep = prepare(cal, fmt="a C header", force=force)
+    cal = prep.cal
+    comment: list[str] = [*(x for n in prep.notes for x in ("", n))]
     code: list[str] = []
     for sensor, part, note in _blocks(cal):
+        check_float_range(part, sensor)
         S = f"{P}_{sensor.upper()}"
         s = f"{p}_{sensor}"
         traw = _test_raw(part)
@@ -120,8 +134,9 @@ def c_header(cal: Calibration, *, prefix: str = "triaxcal") -> str:
             code += _c_temperature_float(part, s, S)
         code.append("")
     return _wrap_header(
-        _header_comment(cal, "Calibration header (float)", comment), guard, code, includes=()
-    )
+        _header_comment(cal, "Calibration header (float)", comment,
+                        tuple(mark_lines(prep.invalid))), guard, code, includes=(),
+        not_valid=f"{P}_CALIBRATION_NOT_VALID" if prep.invalid else None)
 
 
 

@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
 from ._cgen import (
     _AX,
@@ -35,6 +36,7 @@ from ._cgen import (
     _vec,
     _wrap_header,
 )
+from ._trust import mark_lines, prepare
 
 __all__ = ["FRAC_BITS", "TEMP_FRAC_BITS", "FixedPoint", "apply_fixed", "c_fixed_header",
            "fixed_point"]
@@ -96,9 +98,30 @@ def fixed_point(part: SensorCalibration, *, out_scale: float | None = None) -> F
             "choose a smaller out_scale"
         )
     mq = tuple(tuple(_round_half_away(v * one) for v in row) for row in ms)
+    num, den = _fraction(out_scale)
+    if num < 1 or num >= 2**31 or abs(num / den - out_scale) > 1e-9 * out_scale:
+        raise CalibrationError(
+            f"the output scale {out_scale:.4g} counts per unit cannot be written as the "
+            "fraction OUT_SCALE_NUM/OUT_SCALE_DEN (int32, denominator up to 2^20): the matrix "
+            f"entries ({np.max(np.abs(m)):.4g} at most) are too far from 1 for Q7.24; refit in "
+            "units that keep the gains near 1 (or export --format c)")
+    for i, row in enumerate(mq):
+        big = max(abs(v) for v in row)
+        if big < 1 << 14:  # under 14 significant bits: that axis's output is coarse or 0
+            raise CalibrationError(
+                f"row {i} of the matrix is {float(np.max(np.abs(m[i]))):.4g} at most, against "
+                f"{float(np.max(np.abs(m))):.4g} for the largest entry: in Q7.24 at one "
+                "output scale its coefficients keep fewer than 14 significant bits (its "
+                "output would be 0 or coarse); export --format c")
     off = tuple(_round_half_away(v) for v in part.offset)
     if max(abs(v) for v in off) > 2**31 - 65536:
         raise CalibrationError("offset is too large for int32 arithmetic")
+    dmax = 32768 + max(abs(v) for v in off)
+    worst = max(sum(abs(v) for v in row) for row in mq) * dmax
+    if worst + (1 << FRAC_BITS) >= 2**31 * (1 << FRAC_BITS):
+        raise CalibrationError(
+            f"an int16 reading can give an output of {worst / one:.4g} counts, beyond int32: "
+            "choose a smaller out_scale (or export --format c)")
     frac = part.offset - np.array(off, dtype=float)
     frac_q = tuple(_round_half_away(v * one) for v in frac)
     bias = -(ms @ frac) * one
@@ -165,6 +188,7 @@ def c_fixed_header(
     *,
     prefix: str = "triaxcal",
     out_scale: float | Mapping[str, float] | None = None,
+    force: bool = False,
 ) -> str:
     """C99 header for microcontrollers without an FPU: integers only, no ``float`` anywhere.
 
@@ -184,11 +208,16 @@ def c_fixed_header(
         C identifier prefix.
     out_scale : float or dict of sensor -> float, optional
         Output counts per calibrated unit; see :func:`fixed_point`.
+    force : bool
+        Write parts the validity gate refuses; the header then says so and defines
+        ``<PREFIX>_CALIBRATION_NOT_VALID``.
     """
     p = _ident(prefix)
     P = p.upper()
     guard = _guard(p, "CALIBRATION_FIXED")
-    comment: list[str] = [
+    prep = prepare(cal, fmt="a fixed-point C header", force=force)
+    cal = prep.cal
+    comment: list[str] = [*(x for n in prep.notes for x in ("", n)),
         "",
         "Fixed point: offsets are whole raw counts (rounded half away from zero; the fraction",
         "is put back by the Q24 BIAS term, so the rounding costs nothing); the matrix is Q7.24",
@@ -275,10 +304,12 @@ def c_fixed_header(
             )
         code.append("")
     return _wrap_header(
-        _header_comment(cal, "Calibration header (fixed point)", comment),
+        _header_comment(cal, "Calibration header (fixed point)", comment,
+                        tuple(mark_lines(prep.invalid))),
         guard,
         code,
         includes=("<stdint.h>",),
+        not_valid=f"{P}_CALIBRATION_NOT_VALID" if prep.invalid else None,
     )
 
 

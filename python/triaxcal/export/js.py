@@ -1,5 +1,5 @@
 """JavaScript module: the coefficients and an ``apply`` function, for a browser, node or an
-Espruino board (the sphere-fit seed coded its coefficients into an Espruino program).
+Espruino board (the spreadsheet sphere fit coded its coefficients into an Espruino program).
 
 Two forms of the same code:
 
@@ -29,8 +29,10 @@ import math
 import re
 from typing import Any
 
-from ..calibration import Calibration, SensorCalibration
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
+from ._trust import mark_lines, prepare
 
 __all__ = ["JS_FORMS", "js_module", "js_string"]
 
@@ -85,7 +87,7 @@ def _rows(m: Any) -> str:
     return "[" + ", ".join(_vec(r) for r in m) + "]"
 
 
-def _part(part: SensorCalibration, indent: str) -> str:
+def _part(part: SensorCalibration, indent: str, reasons: tuple[str, ...] | None = None) -> str:
     t = part.temperature
     if t is None:
         temp = "null"
@@ -104,6 +106,9 @@ def _part(part: SensorCalibration, indent: str) -> str:
         f"model: {model}",
         f"temperature: {temp}",
     ]
+    if reasons is not None:
+        fields += ["valid: false",
+                   "invalidReasons: [" + ", ".join(js_string(r) for r in reasons) + "]"]
     return "{\n" + ",\n".join(indent + "  " + f for f in fields) + "\n" + indent + "}"
 
 
@@ -147,7 +152,8 @@ function apply(sensor, raw, tempC) {
 }"""
 
 
-def js_module(cal: Calibration, *, prefix: str = "triaxcal", form: str = "esm") -> str:
+def js_module(cal: Calibration, *, prefix: str = "triaxcal", form: str = "esm",
+              force: bool = False) -> str:
     """The calibration as a JavaScript module (see the module docstring).
 
     Parameters
@@ -157,6 +163,9 @@ def js_module(cal: Calibration, *, prefix: str = "triaxcal", form: str = "esm") 
         ``espruino`` form: the name of the global object (``imu.apply("accel", raw)``).
     form : {"esm", "espruino"}
         ES module, or plain ECMAScript 5.1 for Espruino, ``<script>`` and ``require()``.
+    force : bool
+        Write parts the validity gate refuses; the module then says so in a comment and in
+        the part (``valid: false``, ``invalidReasons``).
 
     Examples
     --------
@@ -171,8 +180,12 @@ def js_module(cal: Calibration, *, prefix: str = "triaxcal", form: str = "esm") 
     if form not in JS_FORMS:
         raise CalibrationError(f"form must be one of {JS_FORMS}, got {form!r}")
     name = _ident(prefix)
+    prep = prepare(cal, fmt="a JavaScript module", force=force)
+    cal = prep.cal
+    bad = {s: v.reasons for s, v in prep.invalid}
     ind = "  " if form == "espruino" else ""
-    parts = ",\n".join(f"{ind}    {s}: {_part(cal.part(s), ind + '    ')}" for s in cal.sensors)
+    parts = ",\n".join(f"{ind}    {s}: {_part(cal.part(s), ind + '    ', bad.get(s))}"
+                        for s in cal.sensors)
     obj = (
         f"{ind}var calibration = {{\n"
         f"{ind}  schema: {js_string('triaxcal.calibration/1')},\n"
@@ -187,6 +200,7 @@ def js_module(cal: Calibration, *, prefix: str = "triaxcal", form: str = "esm") 
         "// Sensor calibration written by triaxcal: calibrated = matrix * (raw - offset(T)) *\n"
         "// gain(T); the matrix multiplies, offsets are in raw units (see rawUnit, unit).\n"
         f"// Sensors: {', '.join(cal.sensors)}. apply(sensor, raw, tempC) -> [x, y, z].\n"
+        + "".join(f"// {_comment(line)}\n" for line in (*mark_lines(prep.invalid), *prep.notes))
     )
     if form == "esm":
         return (head + "\n" + obj + "\n\n" + apply_fn + "\n\n"
@@ -202,3 +216,9 @@ def js_module(cal: Calibration, *, prefix: str = "triaxcal", form: str = "esm") 
         f"  exports.apply = {name}.apply;\n"
         "}\n"
     )
+
+
+def _comment(text: str) -> str:
+    """Text safe in a ``//`` comment: printable ASCII on one line (no line terminator, which
+    in JavaScript includes U+2028 and U+2029, can end the comment)."""
+    return "".join(ch if " " <= ch <= "~" else "?" for ch in str(text))[:4000]

@@ -28,24 +28,35 @@ Intrinsics, as Kalibr's ``--imu-models`` name them and its results write them
 Kalibr's IMU model has no magnetometer: a magnetometer part (and its alignment with the
 accelerometer) is not written, and the file says so in a comment.
 
-Values are written with ``repr`` (exact round trip); ``topic`` must be a valid ROS name.
+Kalibr reads the file with ``yaml.safe_load`` (``kalibr_common/ConfigReader.py``
+``ParametersBase.readYaml``), a YAML 1.1 reader whose float needs a decimal point: ``2e-05``
+(Python's ``repr``) would come back as the *string* ``'2e-05'``. Every number is written by
+:func:`yaml_float`, the shortest text that reads back to the same double and that YAML 1.1
+reads as a float (``2.0e-05``). ``topic`` must be a valid ROS name.
+
+A part the validity gate refuses is written only with ``force``, and the file then says so in
+two keys Kalibr ignores: ``valid: false`` and ``invalid_reasons``.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
 from .._core import __version__
-from ..calibration import Calibration
+from ..calibration.file import Calibration
 from ..errors import CalibrationError
 from ._params import physical, require_no_gain_poly
+from ._trust import Scales, mark_lines, prepare
 
-__all__ = ["KALIBR_MODELS", "KALIBR_NOISE_KEYS", "kalibr_imu_yaml", "kalibr_intrinsics"]
+__all__ = ["KALIBR_MODELS", "KALIBR_NOISE_KEYS", "kalibr_imu_yaml", "kalibr_intrinsics",
+           "yaml_float"]
 
 FMT = "Kalibr"
 KALIBR_MODELS = ("calibrated", "scale-misalignment")
@@ -68,7 +79,26 @@ def _lq(a: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
     return lower, rot
 
 
-def kalibr_intrinsics(cal: Calibration, *, counts_per_unit: Mapping[str, Any] | None = None
+def yaml_float(v: Any) -> str:
+    """``v`` as text that YAML 1.1 (PyYAML's ``safe_load``) reads back as the same float.
+
+    >>> yaml_float(2e-05), yaml_float(1e+20), yaml_float(200.0), yaml_float(-0.5)
+    ('2.0e-05', '1.0e+20', '200.0', '-0.5')
+    """
+    f = float(v)
+    if not math.isfinite(f):
+        raise CalibrationError(f"cannot write {f} into Kalibr's YAML")
+    r = repr(f)
+    mant, e, exp = r.partition("e")
+    if "." not in mant:
+        mant += ".0"
+    if e and exp[0] not in "+-":
+        exp = "+" + exp
+    return mant + (("e" + exp) if e else "")
+
+
+def kalibr_intrinsics(cal: Calibration, *, counts_per_unit: Mapping[str, Any] | None = None,
+                      sensor_model: str | Sequence[str] | None = None
                       ) -> dict[str, np.ndarray]:
     """Kalibr's ``scale-misalignment`` intrinsics of ``cal`` (see the module docstring).
 
@@ -80,16 +110,19 @@ def kalibr_intrinsics(cal: Calibration, *, counts_per_unit: Mapping[str, Any] | 
         if getattr(cal, s) is None:
             raise CalibrationError(
                 f"Kalibr's scale-misalignment model needs accelerometer and gyroscope parts; "
-                f"this calibration has no {s}: add it, or write model='calibrated'"
+                f"this calibration has no {s}: add it, or write "
+                f"{opt('model', 'calibrated', flag='--kalibr-model')}"
             )
-    pa = physical(cal.part("accel"), "accel", "m/s^2", "m/s^2", counts_per_unit, fmt=FMT)
-    pg = physical(cal.part("gyro"), "gyro", "rad/s", "rad/s", counts_per_unit, fmt=FMT)
+    scales = Scales(counts_per_unit, sensor_model)
+    pa = physical(cal.part("accel"), "accel", "m/s^2", "m/s^2", scales, fmt=FMT)
+    pg = physical(cal.part("gyro"), "gyro", "rad/s", "rad/s", scales, fmt=FMT)
     for p in (pa, pg):
         if p.offset_poly is not None:
             require_no_gain_poly(p, FMT)
             raise CalibrationError(
                 f"Kalibr's IMU model has no temperature terms; this calibration's {p.sensor} "
-                "has them: apply the calibration upstream and write model='calibrated'"
+                "has them: apply the calibration upstream and write "
+                f"{opt('model', 'calibrated', flag='--kalibr-model')}"
             )
     m_a, q = _lq(np.linalg.inv(pa.matrix), "accelerometer")
     m_g, c = _lq(np.linalg.inv(pg.matrix) @ q.T, "gyroscope")
@@ -108,7 +141,7 @@ def _num(v: Any, name: str, positive: bool = True) -> float:
 
 
 def _mat(m: np.ndarray) -> str:
-    return "[" + ", ".join("[" + ", ".join(repr(float(x)) for x in row) + "]" for row in m) + "]"
+    return "[" + ", ".join("[" + ", ".join(yaml_float(x) for x in row) + "]" for row in m) + "]"
 
 
 def kalibr_imu_yaml(
@@ -119,6 +152,8 @@ def kalibr_imu_yaml(
     noise: Mapping[str, float] | None = None,
     model: str = "scale-misalignment",
     counts_per_unit: Mapping[str, Any] | None = None,
+    sensor_model: str | Sequence[str] | None = None,
+    force: bool = False,
 ) -> str:
     """Kalibr ``imu.yaml`` text.
 
@@ -138,7 +173,12 @@ def kalibr_imu_yaml(
     model : {"scale-misalignment", "calibrated"}
         Kalibr's IMU model (``--imu-models``).
     counts_per_unit : dict, optional
-        The driver's scale for parts in raw counts.
+        The driver's scale for parts in raw counts (none is assumed).
+    sensor_model : str or list of str, optional
+        The part(s) whose datasheet scale converts raw counts.
+    force : bool
+        Write accelerometer and gyroscope parts the validity gate refuses, marked
+        ``valid: false`` with ``invalid_reasons``.
 
     Examples
     --------
@@ -156,6 +196,15 @@ def kalibr_imu_yaml(
                                "/imu/data_raw)")
     rate = _num(rate_hz, "rate_hz")
     lines = [f"# Kalibr IMU configuration written by triaxcal {__version__}"]
+    marks: list[str] = []
+    if cal is not None:
+        imu = [s for s in ("accel", "gyro") if getattr(cal, s) is not None]
+        prep = prepare(cal, imu, fmt=FMT, force=force)
+        cal = prep.cal
+        lines += ["# " + _safe(n, 4000) for n in prep.notes]
+        if prep.invalid:
+            marks = ["valid: false", "invalid_reasons:"] + [
+                "  - " + json.dumps(_safe(m, 4000)) for m in mark_lines(prep.invalid)]
     if cal is not None:
         lines.append(f"# calibration of sensor {_safe(cal.sensor_id)!r}, created "
                      f"{_safe(cal.created_utc)}")
@@ -175,18 +224,19 @@ def kalibr_imu_yaml(
                 + (f"; missing: {sorted(missing)}" if missing else "")
             )
         for key, unit in zip(KALIBR_NOISE_KEYS, _NOISE_UNITS):
-            lines.append(f"{key}: {_num(noise[key], key)!r}  # {unit}")
+            lines.append(f"{key}: {yaml_float(_num(noise[key], key))}  # {unit}")
     else:
         lines.append("# noise figures not given: Kalibr needs accelerometer_noise_density, "
                      "accelerometer_random_walk, gyroscope_noise_density, gyroscope_random_walk")
-    lines += [f"rostopic: {topic}", f"update_rate: {rate!r}  # Hz", f"model: {model}"]
+    lines += [f"rostopic: {topic}", f"update_rate: {yaml_float(rate)}  # Hz", f"model: {model}"]
+    lines += marks
     if model == "calibrated":
         lines.append("# the readings on rostopic must already be calibrated (calibration "
                      "applied upstream)")
         return "\n".join(lines) + "\n"
     if cal is None:
         raise CalibrationError("model 'scale-misalignment' needs a calibration")
-    k = kalibr_intrinsics(cal, counts_per_unit=counts_per_unit)
+    k = kalibr_intrinsics(cal, counts_per_unit=counts_per_unit, sensor_model=sensor_model)
     lines += [
         "# measured accel = M @ a_i + b;  measured gyro = M @ (C_gyro_i @ w_i) + A @ a_i + b",
         "# frame i = R_i @ (triaxcal's calibrated frame), R_i = " + _mat(k["R_i"]),
@@ -203,5 +253,5 @@ def kalibr_imu_yaml(
     return "\n".join(lines) + "\n"
 
 
-def _safe(text: str) -> str:
-    return "".join(ch if ch.isprintable() else "?" for ch in str(text))[:120]
+def _safe(text: str, limit: int = 120) -> str:
+    return "".join(ch if ch.isprintable() else "?" for ch in str(text))[:limit]

@@ -6,17 +6,19 @@ The packet itself (bytes, CRC, the board's ``Cal1:``/``Cal2:`` echo) is
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from .._checks.spelling import opt
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..conventions.rotations import rotation_angle_deg
+from ..conventions.units import unit_factor
 from ..errors import CalibrationError
 from ..io.motioncal import encode_motioncal
-from ..rotations import rotation_angle_deg
-from ..units import DEVICE_COUNTS_PER_UNIT, unit_factor
+from ._trust import Scales, prepare
 
 __all__ = ["motioncal_losses", "motioncal_packet"]
 
@@ -25,23 +27,19 @@ __all__ = ["motioncal_losses", "motioncal_packet"]
 GAIN_TOLERANCE = 1e-3
 
 
-def _driver_scale(
-    part: SensorCalibration, sensor: str, counts_per_unit: Mapping[str, Any] | None
-) -> tuple[float, str]:
-    """(driver units per raw unit, driver unit name) for converting ``part`` to MotionCal."""
+def _driver_scale(part: SensorCalibration, sensor: str, scales: Scales) -> tuple[float, str]:
+    """(driver units per raw unit, driver unit name) for converting ``part`` to MotionCal; a
+    part in raw counts needs the driver's scale from ``scales`` (none is assumed)."""
     if part.raw_unit != "counts":
         return 1.0, part.raw_unit
-    spec = (counts_per_unit or {}).get(sensor, DEVICE_COUNTS_PER_UNIT[sensor])
-    if isinstance(spec, (int, float)):
-        spec = (float(spec), DEVICE_COUNTS_PER_UNIT[sensor][1])
-    cpu, unit = float(spec[0]), str(spec[1])
-    if not (math.isfinite(cpu) and cpu > 0):
-        raise CalibrationError(f"counts per unit for {sensor} must be positive, got {cpu}")
-    return 1.0 / cpu, unit
+    target = {"accel": "m/s^2", "gyro": "rad/s", "mag": "uT"}[sensor]
+    sc = scales.get(sensor, "the MotionCal packet", target)
+    return 1.0 / sc.counts_per_unit, sc.unit
 
 
 def motioncal_losses(
-    cal: Calibration, *, counts_per_unit: Mapping[str, Any] | None = None
+    cal: Calibration, *, counts_per_unit: Mapping[str, Any] | None = None,
+    sensor_model: str | Sequence[str] | None = None,
 ) -> list[str]:
     """What of ``cal`` the MotionCal packet cannot carry, in words (empty: nothing is lost).
 
@@ -53,15 +51,17 @@ def motioncal_losses(
     >>> import numpy as np, triaxcal as tc
     >>> part = tc.SensorCalibration(offset=[10, 0, 0], matrix=np.diag([1.02, 1, 1]) / 16384,
     ...                             unit="g")
-    >>> motioncal_losses(tc.Calibration(accel=part))[0][:62]
+    >>> motioncal_losses(tc.Calibration(accel=part), counts_per_unit={"accel": (16384, "g")}
+    ...                  )[0][:62]
     'accelerometer: gains and cross-axis terms up to 2 % from the d'
     """
     out: list[str] = []
+    scales = Scales(counts_per_unit, sensor_model)
     for sensor, name in (("accel", "accelerometer"), ("gyro", "gyroscope")):
         part = cal.part(sensor) if sensor in cal.sensors else None
         if part is None:
             continue
-        k, u = _driver_scale(part, sensor, counts_per_unit)
+        k, u = _driver_scale(part, sensor, scales)
         # the correction left after the driver's nominal scale, in calibrated units per unit
         conv = 1.0 if part.unit == part.raw_unit else unit_factor(u, part.unit)
         corr = part.matrix / (k * conv)
@@ -81,6 +81,8 @@ def motioncal_packet(
     *,
     counts_per_unit: Mapping[str, Any] | None = None,
     offsets_only: bool = False,
+    sensor_model: str | Sequence[str] | None = None,
+    force: bool = False,
 ) -> bytes:
     """The MotionCal packet for ``cal``.
 
@@ -94,11 +96,16 @@ def motioncal_packet(
     ----------
     cal : Calibration
     counts_per_unit : dict, optional
-        The driver's scale per sensor, as ``{"accel": (16384, "g"), "mag": (10, "uT")}`` (or a
-        bare number in the default unit). Default: the project's device scales
-        (:data:`triaxcal.units.DEVICE_COUNTS_PER_UNIT`):
-        accel 16384 counts/g, gyro 131 counts/(deg/s), mag 10 counts/uT. Ignored for parts
-        whose raw unit is already physical.
+        The driver's scale per sensor, as ``{"accel": (16384, "g"), "mag": (10, "uT")}``.
+        There is no default: a part in raw counts without a scale (here or from
+        ``sensor_model``) is refused, naming the sensor. Ignored for parts whose raw unit is
+        already physical.
+    sensor_model : str or list of str, optional
+        The part(s) whose datasheet scale converts raw counts
+        (:mod:`triaxcal.conventions.sensors`).
+    force : bool
+        Write parts the validity gate refuses (a binary packet cannot say so: the caller
+        must).
     offsets_only : bool
         Accept that the packet loses what :func:`motioncal_losses` lists (the accelerometer's
         and gyroscope's gains, temperature terms). Without it such a calibration is refused,
@@ -106,18 +113,20 @@ def motioncal_packet(
     """
     if not isinstance(offsets_only, bool):
         raise CalibrationError(f"offsets_only must be True or False, got {offsets_only!r}")
-    lost = motioncal_losses(cal, counts_per_unit=counts_per_unit)
+    cal = prepare(cal, fmt="a MotionCal packet", force=force).cal
+    scales = Scales(counts_per_unit, sensor_model)
+    lost = motioncal_losses(cal, counts_per_unit=counts_per_unit, sensor_model=sensor_model)
     if lost and not offsets_only:
         raise CalibrationError(
             "the MotionCal packet cannot carry all of this calibration: " + "; ".join(lost)
-            + ". Export --format c (or c-fixed) to keep every term, or accept the loss with "
-            "--offsets-only (offsets_only=True)")
+            + f". Export {opt('fmt', 'c', flag='--format')} (or c-fixed) to keep every term, "
+            f"or accept the loss with {opt('offsets_only', True)}")
     kw: dict[str, Any] = {}
     if cal.accel is not None:
-        k, u = _driver_scale(cal.accel, "accel", counts_per_unit)
+        k, u = _driver_scale(cal.accel, "accel", scales)
         kw["accel_offset"] = cal.accel.offset * k * unit_factor(u, "m/s^2")
     if cal.gyro is not None:
-        k, u = _driver_scale(cal.gyro, "gyro", counts_per_unit)
+        k, u = _driver_scale(cal.gyro, "gyro", scales)
         kw["gyro_offset"] = cal.gyro.offset * k * unit_factor(u, "rad/s")
     if cal.mag is not None:
         al = cal.mag.alignment
@@ -128,7 +137,7 @@ def motioncal_packet(
                 " deg: export --format adafruit (its soft-iron matrix holds the rotation) or c, "
                 "or drop the alignment on purpose (--no-alignment; cal.mag.replace("
                 "alignment=None))")
-        k, u = _driver_scale(cal.mag, "mag", counts_per_unit)
+        k, u = _driver_scale(cal.mag, "mag", scales)
         ku = k * unit_factor(u, "uT")  # uT per raw unit, as the driver sees it
         # calibrated units -> uT (a part left in raw counts is scaled like the driver)
         cu = ku if cal.mag.unit == cal.mag.raw_unit else unit_factor(cal.mag.unit, "uT")

@@ -37,17 +37,30 @@ and Mission Planner reads too.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import in_command_line
 from .._core import __version__
-from ..calibration import Calibration
+from ..calibration.file import Calibration
+from ..conventions.autopilot import (
+    PX4_COMP_CURRENT,
+    PX4_COMP_THROTTLE,
+    PX4_COMP_TYPE,
+    PX4_SENSOR,
+    PX4_TC,
+    PX4_TC_ENABLE,
+    px4_prefix,
+    px4_tc_prefix,
+)
+from ..conventions.units import unit_factor
 from ..errors import CalibrationError
 from ._params import (
     Physical,
     f32,
+    interference,
     mag_mounting,
     physical,
     pick_sensors,
@@ -57,22 +70,44 @@ from ._params import (
     require_no_gain_poly,
     require_symmetric,
 )
+from ._trust import Prepared, Scales, comment_lines, mark_lines, prepare
 from .ardupilot import _comment
 
-__all__ = ["MAV_PARAM_TYPE_INT32", "MAV_PARAM_TYPE_REAL32", "px4_params", "px4_params_file"]
+__all__ = ["MAV_PARAM_TYPE_INT32", "MAV_PARAM_TYPE_REAL32", "px4_omitted", "px4_params",
+           "px4_params_file"]
 
 FMT = "PX4"
 MAV_PARAM_TYPE_INT32 = 6
 MAV_PARAM_TYPE_REAL32 = 9
-_CAL = {"accel": "ACC", "gyro": "GYRO", "mag": "MAG"}
-_TC = {"accel": "A", "gyro": "G", "mag": "M"}
+_CAL = PX4_SENSOR
+_TC = PX4_TC
 _UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
 
 
-def _device_id(device_ids: Mapping[str, Any] | None, sensor: str) -> int | None:
-    if not device_ids or device_ids.get(sensor) is None:
-        return None
-    v = device_ids[sensor]
+def _device_id(device_ids: Mapping[str, Any] | None, sensor: str,
+               part: Any = None) -> tuple[int | None, str]:
+    """The device id of ``sensor`` and where it came from: ``device_ids`` (the user's), else the
+    log the part was fitted on (``stats["log"]["device_id"]``, or the stored calibration's
+    ``CAL_<S>n_ID``), else None."""
+    if device_ids and device_ids.get(sensor) is not None:
+        return _check_id(device_ids[sensor], sensor), "given"
+    stats = getattr(part, "stats", None) or {}
+    log: Mapping[str, Any] = stats["log"] if isinstance(stats.get("log"), Mapping) else {}
+    v = log.get("device_id") if log.get("format") == "px4-ulog" else None
+    if v is None and isinstance(stats.get("autopilot"), Mapping):
+        ap = stats["autopilot"]
+        if ap.get("autopilot") == "px4" and isinstance(ap.get("params"), Mapping):
+            slot = ap.get("slot")
+            v = ap["params"].get(f"{px4_prefix(sensor, slot)}ID") if isinstance(slot, int) \
+                and 0 <= slot <= 3 else None
+            if isinstance(v, float) and v.is_integer():
+                v = int(v)
+    if v is None or v == 0:
+        return None, ""
+    return _check_id(v, sensor), "from the log"
+
+
+def _check_id(v: Any, sensor: str) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 < int(v) < 2**32:
         raise CalibrationError(f"device id of the {sensor} must be a positive 32-bit whole "
                                f"number (the CAL_*_ID value), got {v!r}")
@@ -89,6 +124,27 @@ def _positive(values: np.ndarray, name: str) -> np.ndarray:
     return values
 
 
+def _power_compensation(part: Any, p: Physical, n: int) -> list[tuple[str, float, int]]:
+    """``CAL_MAGn_<X|Y|Z>COMP`` and ``CAL_MAG_COMP_TYP`` of a part with an interference term.
+
+    PX4 adds ``power * COMP`` to the raw reading before the offset, in the sensor frame
+    (``Magnetometer::Correct``), with ``power`` the battery current in kA or the throttle
+    (``VehicleMagnetometer::UpdatePowerCompensation``); the part adds ``v * x`` after the matrix,
+    so ``COMP = S^-1 v`` (gauss per kA: ``v`` in gauss per A times 1000)."""
+    inter = interference(part)
+    if inter is None:
+        return []
+    per, vec = inter
+    g = vec * unit_factor(part.unit, "gauss") * (1000.0 if per == "A" else 1.0)
+    comp = np.linalg.solve(p.matrix, g)
+    prefix = px4_prefix("mag", n)
+    out = [(f"{prefix}{a}COMP", float(comp[i]), MAV_PARAM_TYPE_REAL32)
+           for i, a in enumerate("XYZ")]
+    out.append((PX4_COMP_TYPE, float(PX4_COMP_CURRENT if per == "A" else PX4_COMP_THROTTLE),
+                MAV_PARAM_TYPE_INT32))
+    return out
+
+
 def px4_params(
     cal: Calibration,
     *,
@@ -96,6 +152,8 @@ def px4_params(
     sensors: Iterable[str] | None = None,
     counts_per_unit: Mapping[str, Any] | None = None,
     device_ids: Mapping[str, int] | None = None,
+    sensor_model: str | Sequence[str] | None = None,
+    force: bool = False,
 ) -> list[tuple[str, float, int]]:
     """PX4 parameters ``(name, value, MAV_PARAM_TYPE)`` for the parts of ``cal``.
 
@@ -113,70 +171,101 @@ def px4_params(
         The driver's scale for parts in raw counts.
     device_ids : dict, optional
         Device ids by sensor (``CAL_ACC0_ID`` of the vehicle): written as ``CAL_*n_ID``, and
-        required for thermal terms, which PX4 applies by ``TC_*n_ID``.
+        required for thermal terms, which PX4 applies by ``TC_*n_ID``. Without one, the id the
+        log recorded for the part is used (a part fitted on a PX4 log); with neither,
+        ``CAL_*n_ID`` is not written and :func:`px4_params_file` says so.
+    sensor_model : str or list of str, optional
+        The part(s) whose datasheet scale converts raw counts (see :func:`ardupilot_params`).
+    force : bool
+        Write parts the validity gate refuses; :func:`px4_params_file` marks the file.
+
+    A part fitted on readings PX4 had already corrected is written as the composed absolute
+    calibration, or refused with the reason.
 
     Returns
     -------
     list of (name, value, type)
         ``type`` is ``MAV_PARAM_TYPE_REAL32`` (9) or ``MAV_PARAM_TYPE_INT32`` (6).
     """
+    return _px4(cal, instance=instance, sensors=sensors, counts_per_unit=counts_per_unit,
+                device_ids=device_ids, sensor_model=sensor_model, force=force)[0]
+
+
+def _px4(cal: Calibration, *, instance: int = 0, sensors: Iterable[str] | None = None,
+         counts_per_unit: Mapping[str, Any] | None = None,
+         device_ids: Mapping[str, int] | None = None,
+         sensor_model: str | Sequence[str] | None = None, force: bool = False
+         ) -> tuple[list[tuple[str, float, int]], Prepared, list[str]]:
     chosen = pick_sensors(cal, sensors, ("accel", "gyro", "mag"), FMT)
+    original = cal
+    prep = prepare(cal, chosen, fmt="PX4 parameters", force=force)
+    cal = prep.cal
+    scales = Scales(counts_per_unit, sensor_model)
+    omitted: list[str] = []
     if isinstance(instance, bool) or not isinstance(instance, int) or not 0 <= instance <= 3:
         raise CalibrationError(f"instance must be 0..3 (PX4's calibration slots), got {instance!r}")
     n = instance
     out: list[tuple[str, float, int]] = []
     real, i32 = MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32
     for sensor in chosen:
-        s, tc = _CAL[sensor], _TC[sensor]
+        cp, tp = px4_prefix(sensor, n), px4_tc_prefix(sensor, n)
         p: Physical = physical(cal.part(sensor), sensor, _UNITS[sensor], _UNITS[sensor],
-                               counts_per_unit, fmt=FMT)
-        dev = _device_id(device_ids, sensor)
+                               scales, fmt=FMT)
+        dev, _ = _device_id(device_ids, sensor, original.part(sensor))
         if dev is not None:
-            out.append((f"CAL_{s}{n}_ID", float(dev), i32))
+            out.append((f"{cp}ID", float(dev), i32))
+        else:
+            omitted.append(
+                f"{cp}ID not written: the {sensor}'s device id is not known (give it with "
+                + (f"--device-id {sensor}=ID" if in_command_line() else
+                   f"device_ids={{{sensor!r}: ID}}")
+                + f", the vehicle's {cp}ID), "
+                f"so these values apply to whichever device the vehicle's {cp}ID names")
         offset = p.offset
         for i, a in enumerate("XYZ"):
-            out.append((f"CAL_{s}{n}_{a}OFF", float(offset[i]), real))
+            out.append((f"{cp}{a}OFF", float(offset[i]), real))
         if sensor == "accel":
-            scale = _positive(require_diagonal(p, FMT, f"CAL_ACC{n}_xSCALE"),
-                              f"CAL_ACC{n}_{{a}}SCALE")
+            scale = _positive(require_diagonal(p, FMT, f"{cp}xSCALE"),
+                              f"{cp}{{a}}SCALE")
             for i, a in enumerate("XYZ"):
-                out.append((f"CAL_ACC{n}_{a}SCALE", float(scale[i]), real))
+                out.append((f"{cp}{a}SCALE", float(scale[i]), real))
         elif sensor == "gyro":
             require_identity(p, FMT)
         else:
             require_symmetric(p, FMT)
             m = p.matrix
-            _positive(np.diag(m).copy(), f"CAL_MAG{n}_{{a}}SCALE")
+            _positive(np.diag(m).copy(), f"{cp}{{a}}SCALE")
             for i, a in enumerate("XYZ"):
-                out.append((f"CAL_MAG{n}_{a}SCALE", float(m[i, i]), real))
+                out.append((f"{cp}{a}SCALE", float(m[i, i]), real))
             for (i, j), a in zip(((0, 1), (0, 2), (1, 2)), "XYZ"):
-                out.append((f"CAL_MAG{n}_{a}ODIAG", float(m[i, j]), real))
-            mnt = mag_mounting(cal, FMT, f"CAL_MAG{n}_ROT")
+                out.append((f"{cp}{a}ODIAG", float(m[i, j]), real))
+            mnt = mag_mounting(cal, FMT, f"{cp}ROT")
             if mnt is not None:
-                out.append((f"CAL_MAG{n}_ROT", float(mnt.number), i32))
+                out.append((f"{cp}ROT", float(mnt.number), i32))
+            out += _power_compensation(cal.part("mag"), p, n)
         if p.offset_poly is None:
             # fitted without thermal terms: the vehicle's own would be subtracted on top
-            out.append((f"TC_{tc}_ENABLE", 0.0, i32))
+            out.append((PX4_TC_ENABLE[sensor], 0.0, i32))
             continue
         require_no_gain_poly(p, FMT)
         require_degree(p, FMT, 3)
         if dev is None:
             raise CalibrationError(
-                f"PX4 applies thermal terms TC_{tc}{n}_* only to the sensor whose device id is "
-                f"TC_{tc}{n}_ID: pass device_ids={{'{sensor}': <CAL_{s}{n}_ID of the vehicle>}} "
+                f"PX4 applies thermal terms {tp}* only to the sensor whose device id is "
+                f"{tp}ID: pass device_ids={{'{sensor}': <{cp}ID of the vehicle>}} "
                 "(--device-id on the command line)"
             )
         poly = np.zeros((4, 3))
         poly[: len(p.offset_poly)] = p.offset_poly
         lo, hi = p.temp_range_c or (p.temp_ref_c, p.temp_ref_c)
-        out += [(f"TC_{tc}_ENABLE", 1.0, i32), (f"TC_{tc}{n}_ID", float(dev), i32),
-                (f"TC_{tc}{n}_TREF", float(p.temp_ref_c or 0.0), real),
-                (f"TC_{tc}{n}_TMIN", float(lo or 0.0), real),
-                (f"TC_{tc}{n}_TMAX", float(hi or 0.0), real)]
+        out += [(PX4_TC_ENABLE[sensor], 1.0, i32), (f"{tp}ID", float(dev), i32),
+                (f"{tp}TREF", float(p.temp_ref_c or 0.0), real),
+                (f"{tp}TMIN", float(lo or 0.0), real),
+                (f"{tp}TMAX", float(hi or 0.0), real)]
         for k in range(4):
             for i in range(3):
-                out.append((f"TC_{tc}{n}_X{k}_{i}", float(poly[k, i]), real))
-    return out
+                out.append((f"{tp}X{k}_{i}", float(poly[k, i]), real))
+    return out, prep, omitted
 
 
 def px4_params_file(
@@ -196,14 +285,18 @@ def px4_params_file(
     for name, v in (("system_id", system_id), ("component_id", component_id)):
         if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 255:
             raise CalibrationError(f"{name} must be a MAVLink id 1..255, got {v!r}")
-    params = px4_params(cal, **kwargs)
+    params, prep, omitted = _px4(cal, **kwargs)
     lines = [
         f"# Onboard parameters for Vehicle {system_id}",
         "#",
         f"# Calibration written by triaxcal {__version__}; sensor id "
-        f"{_comment(cal.sensor_id)}; created {_comment(cal.created_utc)}",
+        f"{_comment(cal.sensor_id) or '(none)'}; created {_comment(cal.created_utc)}",
         "# accel = (raw - thermal - CAL_ACCn_OFF) * CAL_ACCn_SCALE; gyro = raw - thermal - "
         "CAL_GYROn_OFF; mag = R S (raw - CAL_MAGn_OFF), R = CAL_MAGn_ROT (external magnetometers)",
+        *(["# with CAL_MAG_COMP_TYP: mag = R S ((raw + power * CAL_MAGn_xCOMP) - OFF), power = "
+           "battery current in kA (2) or throttle 0..1 (1)"]
+          if any(name == PX4_COMP_TYPE for name, _, _ in params) else []),
+        *comment_lines((*mark_lines(prep.invalid), *prep.notes, *omitted)),
         "#",
         "# Vehicle-Id Component-Id Name Value Type",
     ]
@@ -211,3 +304,9 @@ def px4_params_file(
         text = str(int(value)) if kind == MAV_PARAM_TYPE_INT32 else f32(value, name)
         lines.append(f"{system_id}\t{component_id}\t{name}\t{text}\t{kind}")
     return "\n".join(lines) + "\n"
+
+
+def px4_omitted(cal: Calibration, **kwargs: Any) -> list[str]:
+    """What :func:`px4_params` leaves out for want of information (the device ids it does
+    not know), in words; the same lines :func:`px4_params_file` writes as comments."""
+    return _px4(cal, **kwargs)[2]

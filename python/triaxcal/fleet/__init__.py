@@ -5,31 +5,20 @@
   (``triaxcal batch``).
 * :mod:`~triaxcal.fleet.dask` (also importable as ``triaxcal.dask``) -- the same fits over
   Dask collections, on whatever scheduler the user has (needs ``pip install 'triaxcal[dask]'``).
-* :mod:`~triaxcal.fleet.autocal` -- free-living auto-calibration of wearable accelerometers
-  (van Hees et al. 2014), streamed over recordings larger than memory.
+
+Free-living auto-calibration of wearable accelerometers (van Hees et al. 2014) is a method:
+:mod:`triaxcal.methods.autocal`.
 """
 
 from __future__ import annotations
 
-from .autocal import (
-    AutoCalibration,
-    StillWindows,
-    WindowStats,
-    autocalibrate,
-    fit_still_windows,
-)
-from .batch import REASONS, BoardResult, Limits, batch_fit, fit_options, judge
+from .batch import REASONS, BoardResult, Limits, batch_fit, batch_request, judge
 
 __all__ = [
     "REASONS",
-    "AutoCalibration",
     "BoardResult",
     "Limits",
-    "StillWindows",
-    "WindowStats",
-    "autocalibrate",
     "batch_fit",
-    "fit_options",
-    "fit_still_windows",
+    "batch_request",
     "judge",
 ]

@@ -1,36 +1,40 @@
 """Production line: fit every board's session, judge it against limits, write a record per board.
 
 Each board is fitted exactly as ``triaxcal fit SESSION.csv [options]`` fits one file (the same
-code: :func:`triaxcal.session.fit.fit_table`), so a board's calibration is the same whether it was
-fitted alone or in a batch of thousands. Then the board is judged against :class:`Limits`;
-the checks run in this order and every failed one is recorded (the first is the main reason):
+code: :func:`triaxcal.calibration.session.fit_table`), so a board's calibration is the same
+whether it was fitted alone or in a batch of thousands. Then the board is judged against
+:class:`Limits`; the checks run in this order and every failed one is recorded (the first is the
+main reason):
 
-=================  =============================================================================
-reason             fails when
-=================  =============================================================================
-``unreadable``     the session cannot be read (not a table of numbers, no such columns)
-``dead_axis``      an axis's readings, averaged over blocks of ``window`` samples, span less
-                   than ``dead_axis_ratio`` of the readings' median magnitude (the axis does
-                   not respond to gravity; a board turned through too few orientations still
-                   moves every axis by far more)
-``stuck``          more than ``stuck_max_pct`` % of the rows repeat the previous row exactly
-                   on all three axes (a frozen sensor or bus; noise makes exact repeats rare)
-``saturation``     more than ``saturation_max_pct`` % of the readings of an axis sit at the
-                   full-scale rails, ``|v| >= full_scale`` (raw units)
-``coverage``       the calibrated poses cover less than ``coverage_min_pct`` % of the 24
-                   equal-area cells of the sphere of directions (the ``sphere`` figure of
-                   ``triaxcal capture``'s status line): too few orientations for the model
-``fit_failed``     the fit raised an error (degenerate data, implausible gains ...)
-``too_few_poses``  fewer than ``min_points`` points (poses) were fitted
-``rms``            residual RMS above ``rms_max_pct`` % of the radius
-``noise``          the sensor noise exceeds ``noise_max`` (calibrated units: g rms): within
-                   each still pose the standard deviation of sample-to-sample differences
-                   over sqrt(2), largest axis, median over the poses
-``offset``         an axis's offset exceeds ``offset_max`` (calibrated units: g)
-``gain``           an axis's gain differs from ``1 / counts_per_unit`` by more than
-                   ``gain_max_dev`` (relative; skipped when ``counts_per_unit`` is 0)
-``cross_axis``     ``|offdiag_ij| / sqrt(diag_i diag_j)`` exceeds ``cross_axis_max``
-=================  =============================================================================
+=======================  ===========================================================================
+reason                   fails when
+=======================  ===========================================================================
+``unreadable``           the session cannot be read (not a table of numbers, no such columns)
+``dead_axis``            an axis's readings, averaged over blocks of ``window`` samples, span less
+                         than ``dead_axis_ratio`` of the readings' median magnitude (the axis does
+                         not respond to gravity; a board turned through too few orientations still
+                         moves every axis by far more)
+``stuck``                more than ``stuck_max_pct`` % of the rows repeat the previous row exactly
+                         on all three axes (a frozen sensor or bus; noise makes exact repeats rare)
+``saturation``           more than ``saturation_max_pct`` % of the readings of an axis sit at the
+                         full-scale rails, ``|v| >= full_scale`` (raw units)
+``coverage``             the calibrated poses cover less than ``coverage_min_pct`` % of the 24
+                         equal-area cells of the sphere of directions (the ``sphere`` figure of
+                         ``triaxcal capture``'s status line): too few orientations for the model
+``fit_failed``           the fit raised an error (degenerate data, implausible gains ...)
+``not_a_calibration``    the validity gate refused the fit (:mod:`triaxcal.calibration.gate`:
+                         the same refusal as ``triaxcal fit``); its calibration.json is marked
+                         ``valid: false`` with the reasons
+``too_few_poses``        fewer than ``min_points`` points (poses) were fitted
+``rms``                  residual RMS above ``rms_max_pct`` % of the radius
+``noise``                the sensor noise exceeds ``noise_max`` (calibrated units: g rms): within
+                         each still pose the standard deviation of sample-to-sample differences
+                         over sqrt(2), largest axis, median over the poses
+``offset``               an axis's offset exceeds ``offset_max`` (calibrated units: g)
+``gain``                 an axis's gain differs from ``1 / counts_per_unit`` by more than
+                         ``gain_max_dev`` (relative; skipped when ``counts_per_unit`` is 0)
+``cross_axis``           ``|offdiag_ij| / sqrt(diag_i diag_j)`` exceeds ``cross_axis_max``
+=======================  ===========================================================================
 
 Defaults suit an accelerometer at +-2 g (16384 counts/g, int16 counts) calibrated to g, the
 MPU-6050 class: offsets up to 0.1 g (the datasheet's zero-g tolerance is +-50 mg on X/Y and
@@ -40,10 +44,8 @@ noise up to 10 mg rms. Change them with ``Limits(...)`` or ``--limit name=value`
 
 from __future__ import annotations
 
-import argparse
 import csv
 import hashlib
-import json
 import math
 import os
 import re
@@ -57,8 +59,16 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from ..calibration import Calibration, SensorCalibration
+from .._checks.fields import parse_json
+from ..calibration.file import Calibration
+from ..calibration.part import SensorCalibration
+from ..calibration.request import FitRequest, SourceOptions
+from ..conventions.names import COEFFICIENTS
 from ..errors import CalibrationError
+from ..io.files import check_regular, open_regular, read_bounded
+from ..io.tables import _is_number, _plain, iter_csv
+from ..quality.bounds import LOW_COVERAGE_PCT
+from ..quality.coverage import coverage
 
 __all__ = [
     "REASONS",
@@ -66,7 +76,7 @@ __all__ = [
     "BoardResult",
     "Limits",
     "batch_fit",
-    "fit_options",
+    "batch_request",
     "judge",
     "read_grouped_table",
     "write_summary",
@@ -74,7 +84,7 @@ __all__ = [
 
 #: Fail reasons, in the order the checks run.
 REASONS = ("unreadable", "dead_axis", "stuck", "saturation", "coverage", "fit_failed",
-           "too_few_poses", "rms", "noise", "offset", "gain", "cross_axis")
+           "not_a_calibration", "too_few_poses", "rms", "noise", "offset", "gain", "cross_axis")
 
 
 @dataclass(frozen=True)
@@ -97,7 +107,7 @@ class Limits:
     stuck_max_pct: float = 5.0
     full_scale: float = 32767.0
     saturation_max_pct: float = 0.1
-    coverage_min_pct: float = 40.0
+    coverage_min_pct: float = LOW_COVERAGE_PCT
     min_points: int = 12
     rms_max_pct: float = 1.0
     noise_max: float = 0.01
@@ -251,17 +261,16 @@ def _fit_checks(part: SensorCalibration, noise_raw: float | None, limits: Limits
     return fails, m
 
 
-def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float | None:
+def _pose_noise(table: Any, cols: list[int], request: FitRequest) -> float | None:
     """Sensor noise (raw units, rms): within each still pose (found as ``fit --poses`` finds
     them) the standard deviation of the sample-to-sample differences over sqrt(2) (blind to
     slow drift and to the slow ends of moves), largest axis; the median over poses."""
-    if not args.poses:
+    if not request.source.poses:
         return None
-    from ..poses import sensor_columns, session_poses
-    from ..session.pose_options import settings_from_args
+    from ..detect.session import sensor_columns, session_poses
 
     accel = None if "accel" in sensor_columns(table.names) else cols
-    det, _ = session_poses(table.names, table.data, settings_from_args(args), accel=accel)
+    det, _ = session_poses(table.names, table.data, request.source.detection, accel=accel)
     noise = []
     for p in det.poses:
         seg = table.data[p.start:p.end][:, cols]
@@ -270,51 +279,47 @@ def _pose_noise(table: Any, cols: list[int], args: argparse.Namespace) -> float 
     return float(np.median(noise)) if noise else None
 
 
-def _coverage(points: np.ndarray) -> float:
-    """Share (%) of the 24 equal-area cells hit: the capture status line's "sphere" figure."""
-    from ..io.capture import coverage
-
-    return 100.0 * coverage(points) if len(points) else 0.0
-
-
 def judge(
     table: Any,
-    args: argparse.Namespace,
+    request: FitRequest,
     limits: Limits,
     *,
     board_id: str,
 ) -> BoardResult:
     """Fit one board's table as ``triaxcal fit`` would, then judge it against ``limits``."""
+    from ..calibration.gate import check_part, judged
+    from ..calibration.session import fit_session
     from ..io.tables import pick_columns
-    from ..session.fit import fit_table
 
     source = str(table.path)
     fails: list[tuple[str, str]] = []
     measures: dict[str, Any] = {}
     try:
-        cols = pick_columns(table, args.columns, args.sensor or "accel")
+        cols = pick_columns(table, request.source.columns, request.sensor)
     except CalibrationError as exc:
         return BoardResult(board_id, source, "fail", ("unreadable",), f"unreadable: {exc}", None)
     raw = table.data[:, cols]
-    f, m = _raw_checks(raw, limits, max(1, int(args.window)))
+    f, m = _raw_checks(raw, limits, request.source.detection.window)
     fails += f
     measures.update(m)
     part = None
     try:
-        outcome = fit_table(table, args)
-        part = outcome.part
+        outcome = fit_session(table, request)
+        gate = check_part(outcome.part, request.sensor)
+        if not gate.valid:
+            fails.append(("not_a_calibration", gate.text("the fit")))
+        part = judged(outcome.part, gate, force=True)
     except CalibrationError as exc:
         # name the cause when it is a too narrow set of directions
         pts = raw
-        if args.poses:
+        if request.source.poses:
             try:
-                from ..poses import pose_points
-                from ..session.pose_options import settings_from_args
+                from ..detect.session import pose_points
 
-                pts, _ = pose_points(table, cols, settings_from_args(args))
+                pts, _ = pose_points(table, cols, request.source.detection)
             except CalibrationError:
                 pts = raw[:0]
-        cov = _coverage(pts)
+        cov = coverage(pts).percent
         measures["coverage_pct"] = cov
         if cov < limits.coverage_min_pct:
             fails.append(("coverage", f"the poses cover {cov:.0f} % of the sphere (limit "
@@ -322,13 +327,13 @@ def judge(
                           "orientations"))
         fails.append(("fit_failed", f"the fit failed: {exc}"))
     if part is not None:
-        cov = _coverage(part.apply(outcome.points))
+        cov = coverage(part.apply(outcome.points)).percent
         measures["coverage_pct"] = cov
         if cov < limits.coverage_min_pct:
             fails.append(("coverage", f"the poses cover {cov:.0f} % of the sphere (limit "
                           f"{limits.coverage_min_pct:g} %): turn the board through more "
                           "orientations"))
-        noise_raw = _pose_noise(table, cols, args)
+        noise_raw = _pose_noise(table, cols, request)
         f, m = _fit_checks(part, noise_raw, limits)
         fails += f
         measures.update(m)
@@ -343,25 +348,17 @@ def judge(
 # ------------------------------------------------------------------------------ reading input
 
 
-def fit_options(**overrides: Any) -> argparse.Namespace:
-    """The options of ``triaxcal fit`` with their defaults (``poses=True``), overridden.
+def batch_request(**changes: Any) -> FitRequest:
+    """The :class:`~triaxcal.calibration.request.FitRequest` of ``triaxcal batch`` by default:
+    ``triaxcal fit``'s defaults with still poses (``source.poses``), then ``changes``.
 
     Examples
     --------
-    >>> fit_options(model="full").model, fit_options().poses
+    >>> batch_request(model="full").model, batch_request().source.poses
     ('full', True)
     """
-    from ..session.fit import add_fit_options
-
-    p = argparse.ArgumentParser(add_help=False)
-    add_fit_options(p)
-    ns = p.parse_args([])
-    ns.poses = True
-    for k, v in overrides.items():
-        if not hasattr(ns, k):
-            raise CalibrationError(f"unknown fit option {k!r}")
-        setattr(ns, k, v)
-    return ns
+    base = FitRequest(source=SourceOptions(poses=True))
+    return base.replace(**changes) if changes else base
 
 
 _ID_UNSAFE = re.compile(r"[^A-Za-z0-9._-]")
@@ -391,6 +388,11 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
             raise CalibrationError(
                 "reading Parquet needs pyarrow: pip install 'triaxcal[dask]'"
             ) from None
+        check_regular(p, what="Parquet table")
+        with open_regular(p, what="Parquet table") as fh:
+            magic = fh.read(4)
+        if magic != b"PAR1":
+            raise CalibrationError(f"{p} is not a Parquet file (it does not start with PAR1)")
         try:
             t = pq.read_table(p)
         except Exception as exc:  # noqa: BLE001 - pyarrow raises many kinds
@@ -407,29 +409,34 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
             raise CalibrationError(f"{p}: the columns other than {by!r} must be numbers "
                                    f"({exc})") from None
     else:
-        with open(p, encoding="utf-8", errors="replace", newline="") as f:
-            reader = csv.reader(f)
-            try:
-                header = [h.strip() for h in next(reader)]
-            except StopIteration:
-                raise CalibrationError(f"{p} is empty") from None
-            if by not in header:
+        records = iter_csv(p, what="table of boards")
+        try:
+            _, head = next(records)
+        except StopIteration:
+            raise CalibrationError(f"{p} is empty") from None
+        header = [h.strip() for h in head]
+        if by not in header:
+            raise CalibrationError(
+                f"{p} has no column {by!r}; its header is {', '.join(header)}")
+        k = header.index(by)
+        others = [h for i, h in enumerate(header) if i != k]
+        ids, rows = [], []
+        for lineno, row in records:
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue
+            if len(row) != len(header):
                 raise CalibrationError(
-                    f"{p} has no column {by!r}; its header is {', '.join(header)}")
-            k = header.index(by)
-            others = [h for i, h in enumerate(header) if i != k]
-            ids, rows = [], []
-            for lineno, row in enumerate(reader, start=2):
-                if not row or (len(row) == 1 and not row[0].strip()):
-                    continue
-                if len(row) != len(header):
-                    raise CalibrationError(
-                        f"{p}, line {lineno}: {len(row)} values, expected {len(header)}")
-                ids.append(row[k].strip())
-                try:
-                    rows.append([float(v) for i, v in enumerate(row) if i != k])
-                except ValueError:
-                    raise CalibrationError(f"{p}, line {lineno}: not all numbers") from None
+                    f"{p}, line {lineno}: {len(row)} values, expected {len(header)}")
+            ids.append(row[k])  # as written: ids that differ only by spaces are other boards
+            values = [v.strip() for i, v in enumerate(row) if i != k]
+            # numbers as the table reader reads them: plain ASCII decimals, finite
+            if not all(_plain(v) and _is_number(v) for v in values):
+                raise CalibrationError(f"{p}, line {lineno}: not all numbers")
+            row_values = [float(v) for v in values]
+            if not all(math.isfinite(v) for v in row_values):
+                raise CalibrationError(f"{p}, line {lineno}: a value is not finite (nan or "
+                                       "inf): drop or fix that row")
+            rows.append(row_values)
         data = np.array(rows, dtype=np.float64).reshape(-1, len(others))
     if not ids:
         raise CalibrationError(f"{p} has no data rows")
@@ -448,8 +455,8 @@ def read_grouped_table(path: Any, by: str) -> list[tuple[str, Any]]:
 # ------------------------------------------------------------------------------ the batch
 
 
-def _work(job: tuple[str, Any, argparse.Namespace, Limits, str | None, str]) -> BoardResult:
-    board_id, src, args, limits, out_dir, prefix = job
+def _work(job: tuple[str, Any, FitRequest, Limits, str | None, str]) -> BoardResult:
+    board_id, src, request, limits, out_dir, prefix = job
     from ..io.tables import read_table
 
     if isinstance(src, (str, Path)):
@@ -461,23 +468,23 @@ def _work(job: tuple[str, Any, argparse.Namespace, Limits, str | None, str]) -> 
     else:
         table = src
     try:
-        res = judge(table, args, limits, board_id=board_id)
+        res = judge(table, request, limits, board_id=board_id)
     except Exception as exc:  # noqa: BLE001 - one bad board must not stop the line
         res = BoardResult(board_id, str(getattr(table, "path", src)), "fail", ("fit_failed",),
                           f"the fit failed: {exc!r}", None)
     if out_dir is not None and res.part is not None:
-        res = replace(res, outputs=_write_board(res, args, limits, Path(out_dir), prefix))
+        res = replace(res, outputs=_write_board(res, request, limits, Path(out_dir), prefix))
     return res
 
 
-def _write_board(res: BoardResult, args: argparse.Namespace, limits: Limits, out: Path,
+def _write_board(res: BoardResult, request: FitRequest, limits: Limits, out: Path,
                  prefix: str) -> tuple[str, ...]:
     from ..export import export
 
     assert res.part is not None
     folder = out / res.board_id
     folder.mkdir(parents=True, exist_ok=True)
-    sensor = args.sensor or "accel"
+    sensor = request.sensor
     parts: dict[str, Any] = {sensor: res.part}
     cal = Calibration(**parts, sensor_id=res.board_id, extra={
         "verdict": res.verdict, "reasons": list(res.reasons), "message": res.message,
@@ -524,7 +531,7 @@ class _Progress:
 def batch_fit(
     sources: Sequence[tuple[str, Any]],
     *,
-    args: argparse.Namespace | None = None,
+    request: FitRequest | None = None,
     limits: Limits | None = None,
     out_dir: Any = None,
     prefix: str = "triaxcal",
@@ -537,8 +544,9 @@ def batch_fit(
     ----------
     sources : sequence of (board id, session path or Table)
         One entry per board (see :func:`read_grouped_table` for one table of many boards).
-    args : argparse.Namespace, optional
-        The fit options (:func:`fit_options`; default: ``triaxcal fit``'s with ``--poses``).
+    request : FitRequest, optional
+        How each board is fitted (default: :func:`batch_request`, ``triaxcal fit``'s defaults
+        with still poses).
     limits : Limits, optional
     out_dir : str or Path, optional
         Where to write ``<id>/calibration.json`` (every fitted board, with the verdict in
@@ -558,7 +566,7 @@ def batch_fit(
     """
     from ..export._cgen import _ident
 
-    args = args or fit_options()
+    request = request if request is not None else batch_request()
     limits = limits or Limits()
     prefix = _ident(prefix)
     ids = [safe_id(i) for i, _ in sources]
@@ -572,7 +580,7 @@ def batch_fit(
     out = None if out_dir is None else str(out_dir)
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
-    work = [(ids[k], src, args, limits, out, prefix) for k, (_, src) in enumerate(sources)]
+    work = [(ids[k], src, request, limits, out, prefix) for k, (_, src) in enumerate(sources)]
     n_jobs = jobs if jobs is not None else (os.cpu_count() or 1)
     if n_jobs < 1:
         raise CalibrationError(f"jobs must be >= 1, got {n_jobs}")
@@ -601,10 +609,8 @@ def batch_fit(
 
 #: Columns of ``summary.csv``, one row per board.
 SUMMARY_COLUMNS = (
-    "id", "verdict", "reasons", "message", "model", "raw_unit", "unit",
-    "offset_x", "offset_y", "offset_z", "diag_x", "diag_y", "diag_z",
-    "offdiag_xy", "offdiag_xz", "offdiag_yz", "radius", "rms", "rms_pct", "coverage_pct",
-    "points", "noise", "cross_axis", "source",
+    "id", "verdict", "reasons", "message", "model", "raw_unit", "unit", *COEFFICIENTS,
+    "radius", "rms", "rms_pct", "coverage_pct", "points", "noise", "cross_axis", "source",
 )
 
 
@@ -655,12 +661,13 @@ def write_summary(results: Sequence[BoardResult], path: Any) -> Path:
 def load_limits(path: Any) -> Limits:
     """Read limits from a JSON file ``{"offset_max": 0.05, ...}``."""
     p = Path(path)
+    data = read_bounded(p, limit=1 << 20, what="limits file")  # a regular file, <= 1 MiB
     try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise CalibrationError(f"limits file {p} not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        d = parse_json(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
         raise CalibrationError(f"limits file {p} is not JSON: {exc}") from None
+    except CalibrationError as exc:
+        raise CalibrationError(f"limits file {p}: {exc}") from None
     return Limits.from_mapping(d)
 
 

@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError
-from ..fit import BatchFit
-from ..fit import fit_batch as _fit_batch
+from ..fit.ellipsoid import BatchFit
+from ..fit.ellipsoid import fit_batch as _fit_batch
 
 try:
     import dask
@@ -279,7 +279,7 @@ def autocalibrate_many(
         One per recording, in order; a recording that cannot be read or calibrated gives an
         ``AutoCalibration`` with ``accepted=False`` and the reason.
     """
-    from .autocal import autocalibrate_source
+    from ..methods.autocal import autocalibrate_source
 
     recs = list(recordings)
     rates = (list(rate_hz) if isinstance(rate_hz, (list, tuple, np.ndarray))

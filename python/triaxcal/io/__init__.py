@@ -1,32 +1,11 @@
-"""Capture from sensor boards: the wire protocols (:mod:`triaxcal.io.protocol`, pure: bytes
-in, records out) and the serial reader built on them."""
+"""Bytes and files in, nothing above: the wire protocols (:mod:`~triaxcal.io.protocol`, pure:
+bytes in, records out), framing, the serial reader, tables of numbers
+(:mod:`~triaxcal.io.tables`), logs of autopilots and ROS (:mod:`~triaxcal.io.logs`), wearable
+files, bounded reads and atomic writes (:mod:`~triaxcal.io.files`)."""
 
-from .protocol import (
-    PROTOCOLS,
-    RAW_SCALES,
-    BinaryDecoder,
-    DecoderStats,
-    FramedDecoder,
-    RawDecoder,
-    TextDecoder,
-    encode_binary,
-    encode_framed,
-    encode_raw,
-    encode_text,
-    make_decoder,
-)
+from .logs import read_log
+from .recording import LogRecording, Stream
+from .tables import Table, read_table
 
-__all__ = [
-    "PROTOCOLS",
-    "RAW_SCALES",
-    "BinaryDecoder",
-    "DecoderStats",
-    "FramedDecoder",
-    "RawDecoder",
-    "TextDecoder",
-    "encode_binary",
-    "encode_framed",
-    "encode_raw",
-    "encode_text",
-    "make_decoder",
-]
+#: The public names (``triaxcal.__all__`` gathers them).
+__all__ = ["LogRecording", "Stream", "Table", "read_log", "read_table"]

@@ -10,9 +10,9 @@ sample before its offsets (``_make_factory_sensitivity_adjustment``). ``k`` lies
 (ASA 0) and 1.498 (ASA 255). The AK09916 (inside the ICM-20948) has no such registers: its
 readings need no factor (ArduPilot's AK09916 driver applies none).
 
-:func:`apply_asa` adjusts readings before fitting; :func:`triaxcal.parts.fold_asa` writes the
-resulting calibration for the register counts the chip reports, so that firmware applies one
-calibration and no separate factor.
+:func:`apply_asa` adjusts readings before fitting; :func:`triaxcal.calibration.parts.fold_asa`
+writes the resulting calibration for the register counts the chip reports, so that firmware applies
+one calibration and no separate factor.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points
+from .._checks.arrays import as_points
 from ..errors import CalibrationError
 
 __all__ = ["apply_asa", "asa_factors"]

@@ -1,6 +1,7 @@
 """The firmware's still-pose mode (mode byte ``S``): the board finds the poses, the host decodes.
 
-In this mode the board runs the seed's window detector itself (``firmware/src/still.h``) and
+In this mode the board runs the sphere-centre note's window detector itself
+(``firmware/src/still.h``) and
 sends, in the framed protocol's envelope, ``COBS(seq, type, fields, CRC-16/CCITT-FALSE LE)``
 then ``0x00`` (``seq`` shared by every frame, +1 per frame), three kinds of frame, told apart by
 the ``type`` byte (all integers little-endian):
@@ -50,6 +51,8 @@ __all__ = [
 MODE_BYTE = b"S"
 
 FRAME_POSE, FRAME_STATUS, FRAME_SETTINGS = 0x50, 0x57, 0x43  # 'P', 'W', 'C'
+# the board's own fit and stored calibration after the last pose (triaxcal.io.board_store)
+_CALIBRATION_FRAMES = (0x51, 0x4B)  # 'Q', 'K'
 _SETTINGS = struct.Struct("<BBBHHHB")  # the 10 settings bytes
 _STATUS = struct.Struct("<BBH3h3h")  # 16 bytes after the type byte
 _SETTINGS_VERSION = 1
@@ -74,7 +77,8 @@ _RANGES = {
 class BoardPoseSettings:
     """Settings of the board's still-pose detector (the firmware's ``struct still_settings``).
 
-    All integers, in the board's units. The defaults are the firmware's: the seed's 0.07 g
+    All integers, in the board's units. The defaults are the firmware's: the original method's 0.07
+    g
     (1147 counts at 16384 counts/g) and 2 s hold-off, 100 samples per second.
 
     Attributes
@@ -87,7 +91,7 @@ class BoardPoseSettings:
         Steady windows averaged into a pose before it is registered (and the buzzer beeps),
         1..250; the first steady window after a move is not averaged.
     holdoff_ms : int
-        No pose is averaged for this long after a beep, 0..60000 (the seed's 2000).
+        No pose is averaged for this long after a beep, 0..60000 (the original method's 2000).
     accel_threshold : int
         Largest change of an accelerometer axis's window mean from the previous window's, in
         counts, 1..32767.
@@ -356,6 +360,8 @@ class BoardPoseDecoder(FramedDecoder):
                 return bad
             self.settings_accepted = bool(body[0])
             self.heartbeats += 1
+        elif kind in _CALIBRATION_FRAMES:
+            self.heartbeats += 1  # intact, for board_store's decoder: no pose, not dropped
         else:
             return bad
         if self.stats.last_seq is not None:

@@ -2,16 +2,24 @@
 
 * **Save calibration** = ``triaxcal fit SESSION --sensor accel --poses ... -o calibration.json
   --new`` then ``triaxcal fit SESSION --sensor mag ... -o calibration.json``, into the live
-  options' ``out_dir``: the commands (:func:`fit_argv`) are run by the command line itself
-  (:func:`run_cli`), so every rule of ``fit`` applies (refusing an undetermined fit, keeping
-  the replaced calibration as ``previous``...).
-* **Export C header** = Save, then ``triaxcal export calibration.json --format c`` (or
-  ``c-fixed``) ``-o <prefix>_calibration.h`` (``<prefix>_calibration_fixed.h``).
+  options' ``out_dir``: the same library call as the command
+  (:func:`triaxcal.calibration.session.fit_to_file` with the page's
+  :func:`~triaxcal.live.fitting.fit_request`), so every rule of ``fit`` applies (the validity
+  gate refuses what is not a calibration, the replaced calibration is kept as ``previous``...).
+* **Export C header** = Save, then the C header export (``triaxcal export calibration.json
+  --format c`` or ``c-fixed``) to ``<prefix>_calibration.h`` (``<prefix>_calibration_fixed.h``).
 * **Send to board** = Save, then ``triaxcal send calibration.json``: the 68-byte MotionCal
   packet goes out over the port being captured (it stays open), and the board's ``Cal1:``
   and ``Cal2:`` echo must repeat every value. The echo lines arrive amid the stream, so the
   decoder drops the frame they interrupt (it is counted like any damaged frame); polled binary
   cannot carry them (the next request clears the input), so Send needs a streaming protocol.
+
+Export and Send refuse a calibration the validity gate refuses (as ``triaxcal export`` and
+``send`` do; Save writes only what passes it), and say why, unless ``force``; a forced header
+says it is not valid. Send needs the board driver's scale: the live options'
+``counts_per_unit`` / ``sensor_model`` (``capture --live --counts-per-unit ...``), or the fixed
+scale of MotionCal's ``Raw:`` lines (:data:`triaxcal.io.protocol.RAW_SCALES`); without either
+it is refused, naming what is missing.
 
 After a Reset, Save fits only the rows captured since: they are first copied, header and all,
 to ``<session>.after-reset-<k>.csv`` next to the session, which is then the file fitted (so
@@ -20,64 +28,51 @@ to ``<session>.after-reset-<k>.csv`` next to the session, which is then the file
 
 from __future__ import annotations
 
-import contextlib
-import io
 import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import CalibrationError
-from .fitting import fit_argv, fit_session, pose_argv, session_to_fit
+from .fitting import fit_request, session_to_fit
 
 if TYPE_CHECKING:
-    from ..calibration import Calibration
+    from ..calibration.file import Calibration
     from .state import LiveState
 
-__all__ = ["export_header", "fit_argv", "fit_session", "pose_argv", "reset", "run_cli", "save",
-           "send"]
+__all__ = ["export_header", "reset", "save", "send"]
 
 _ACTION_LOCK = threading.Lock()
 
 
-def run_cli(argv: list[str]) -> tuple[int, str, str]:
-    """Run ``triaxcal ARGV`` in this process: ``(exit code, stdout, stderr)``.
-
-    Standard output and error are redirected while it runs (process-wide: nothing else of a
-    live capture prints to them; the capture's status line holds its own stream)."""
-    from ..cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main(argv)
-    return rc, out.getvalue(), err.getvalue()
-
-
 def _save(state: LiveState) -> tuple[Calibration, Path, str]:
-    """``triaxcal fit`` of each sensor into calibration.json; raises with its messages."""
-    from ..calibration import Calibration
+    """Fit each sensor into calibration.json as ``triaxcal fit`` does; raises with its
+    messages when nothing could be saved."""
+    from ..calibration.file import Calibration
+    from ..calibration.session import fit_to_file
+    from ..report.text import fit_lines
 
     path = state.out_dir / "calibration.json"
     if not state.session.exists():
         raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")
     state.out_dir.mkdir(parents=True, exist_ok=True)
-    data = str(session_to_fit(state))
+    data = session_to_fit(state)
     lines: list[str] = []
     failed: list[str] = []
     written = False
     for sensor in ("accel", "mag"):
         if sensor not in state.cols:
             continue
-        rc, out, err = run_cli(fit_argv(state, sensor, data, str(path), new=not written))
-        said = " ".join(line.strip() for line in (out + err).splitlines() if line.strip())
-        if rc == 0:
-            written = True
-            lines.append(said)
-        else:
-            failed.append(f"{sensor}: {said}")
+        try:
+            saved = fit_to_file(data, fit_request(state, sensor), path, new=not written)
+        except CalibrationError as exc:
+            failed.append(f"{sensor}: not saved: {exc}")
+            continue
+        written = True
+        lines.append(fit_lines(saved)[0])
     if not written:
         raise CalibrationError("nothing saved: " + "; ".join(failed))
-    msg = " ".join(lines) + ("" if not failed else " (not saved: " + "; ".join(failed) + ")")
+    msg = " ".join(lines) + ("" if not failed else " (" + "; ".join(failed) + ")")
     return Calibration.load(path), path, msg
 
 
@@ -112,8 +107,10 @@ def save(state: LiveState) -> dict[str, Any]:
     return _run(state, "save", go)
 
 
-def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
-    """Export C header: Save, then ``triaxcal export calibration.json --format FMT``."""
+def export_header(state: LiveState, fmt: str, *, force: bool = False) -> dict[str, Any]:
+    """Export C header: Save, then ``triaxcal export calibration.json --format FMT`` (with
+    ``force``: ``--force``)."""
+    from ..export import export
     from ..export._cgen import _ident
 
     if fmt not in ("c", "c-fixed"):
@@ -125,16 +122,47 @@ def export_header(state: LiveState, fmt: str) -> dict[str, Any]:
         prefix = _ident(state.options.prefix)
         name = f"{prefix}_calibration.h" if fmt == "c" else f"{prefix}_calibration_fixed.h"
         out = state.out_dir / name
-        rc, said, err = run_cli(["export", str(cal_path), "--format", fmt, "--prefix", prefix,
-                                 "-o", str(out)])
-        if rc != 0:
-            raise CalibrationError(f"{msg}; but the export failed: {err.strip()}")
-        return {"message": f"{msg}; {said.strip()}", "path": str(out)}
+        try:
+            export(cal, fmt, out, prefix=prefix, force=force)
+        except CalibrationError as exc:
+            raise CalibrationError(f"{msg}; but the export failed: {exc}") from None
+        note = "" if not force or not _invalid(cal) else (
+            " -- NOT A VALID CALIBRATION, written because forced: " + _invalid(cal))
+        return {"message": f"{msg}; wrote {out}{note}", "path": str(out)}
 
     return _run(state, f"export-{fmt}", go)
 
 
-def send(state: LiveState, *, offsets_only: bool = False) -> dict[str, Any]:
+def _invalid(cal: Calibration) -> str:
+    """The gate's reasons against the parts of ``cal``, in words ("" when all pass)."""
+    from ..calibration.gate import require_valid
+
+    out = []
+    for s in cal.sensors:
+        v = require_valid(cal.part(s), s, force=True)
+        if not v.valid:
+            out.append(f"{s}: " + "; ".join(v.reasons))
+    return " | ".join(out)
+
+
+def _scales(state: LiveState) -> dict[str, Any]:
+    """The driver's scale for Send: the live options', else the ``Raw:`` format's own."""
+    opts = state.options
+    cpu = getattr(opts, "counts_per_unit", None)
+    models = tuple(getattr(opts, "sensor_model", ()) or ())
+    if cpu or models:
+        return {"counts_per_unit": cpu, "sensor_model": list(models) or None}
+    if state.protocol == "raw":
+        from ..io.protocol import RAW_SCALES
+
+        return {"counts_per_unit": {"accel": (RAW_SCALES["accel"], "g"),
+                                    "gyro": (RAW_SCALES["gyro"], "deg/s"),
+                                    "mag": (RAW_SCALES["mag"], "uT")}}
+    return {}
+
+
+def send(state: LiveState, *, offsets_only: bool = False,
+         force: bool = False) -> dict[str, Any]:
     """Send to board: Save, then the MotionCal packet over the open port, with the echo check
     of ``triaxcal send``. The packet carries the accelerometer's and gyroscope's offsets but
     not their gains: as ``triaxcal send`` does, such a calibration is refused (the answer has
@@ -152,13 +180,24 @@ def send(state: LiveState, *, offsets_only: bool = False) -> dict[str, Any]:
                 "polled binary cannot carry the board's echo while capturing: stop the capture "
                 "(Ctrl-C), then `triaxcal send calibration.json --port PORT`")
         cal, cal_path, msg = _save(state)
-        losses = motioncal_losses(cal)
+        from ..export._trust import prepare
+
+        try:
+            prepare(cal, fmt="a MotionCal packet", force=force, action="send")
+            scales = _scales(state)
+            losses = motioncal_losses(cal, **scales)
+        except CalibrationError as exc:
+            raise CalibrationError(
+                f"{msg}; not sent: {exc}"
+                + (" (start the capture with --counts-per-unit or --sensor-model; "
+                   "LiveOptions(counts_per_unit=...))" if "guess the driver" in str(exc)
+                   else "")) from None
         if losses and not offsets_only:
             raise _NeedsOffsetsOnly(
                 f"{msg}; not sent: the MotionCal packet cannot carry " + "; ".join(losses)
                 + ". Send the offsets only (as `triaxcal send --offsets-only`), or export a C "
                 "header, which carries everything")
-        packet = motioncal_packet(cal, offsets_only=offsets_only)
+        packet = motioncal_packet(cal, offsets_only=offsets_only, force=force, **scales)
         state._echo = bytearray()
         try:
             reader.write(packet)

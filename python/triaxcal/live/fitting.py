@@ -1,6 +1,8 @@
-"""The fits the live page runs on the saved session, as ``triaxcal fit`` runs them: the command
-arguments that carry the page's options (:func:`fit_argv`), the rows to fit after a Reset
-(:func:`session_to_fit`), and the fit itself (:func:`fit_session`).
+"""The fits the live page runs on the saved session, as ``triaxcal fit`` runs them: the
+:class:`~triaxcal.calibration.request.FitRequest` of each sensor built from the page's options
+(:func:`fit_request`), the equivalent command line shown on the page (:func:`fit_argv`), the
+rows to fit after a Reset (:func:`session_to_fit`), and the fit itself
+(:func:`fit_saved_session`).
 
 These need only what :class:`FitSource` names (a :class:`~triaxcal.live.state.LiveState` has
 it all), so the page's state can call them without this module knowing the state.
@@ -11,14 +13,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from ..calibration.request import FitRequest, SourceOptions
+from ..detect.session import PoseSettings
 from ..errors import CalibrationError
 
 if TYPE_CHECKING:
-    from ..poses import PoseSettings
-    from ..session.fit import FitOutcome
+    from ..calibration.session import FitOutcome
     from .options import LiveOptions
 
-__all__ = ["FitSource", "fit_argv", "fit_session", "pose_argv", "session_to_fit"]
+__all__ = ["FitSource", "fit_argv", "fit_request", "fit_saved_session", "pose_argv",
+           "session_to_fit"]
 
 
 class FitSource(Protocol):
@@ -35,12 +39,22 @@ class FitSource(Protocol):
     last_fit_errors: list[str]
 
 
+def fit_request(state: FitSource, sensor: str) -> FitRequest:
+    """The request Save fits ``sensor`` with: the accelerometer's still poses to the page's
+    accelerometer radius, the magnetometer on every row (to its radius, or its own scale)."""
+    o = state.options
+    common: dict[str, Any] = {"model": o.model, "outliers": o.outliers, "sigma": o.sigma,
+                              "rounds": o.rounds}
+    if sensor == "accel":
+        return FitRequest(sensor="accel", radius=o.accel_radius, **common,
+                          source=SourceOptions(poses=True, detection=state.detection))
+    return FitRequest(sensor=sensor, radius=o.mag_radius, **common)
+
+
 def pose_argv(settings: PoseSettings) -> list[str]:
     """The pose options (``--window``, ``--accel-threshold``...) that describe ``settings``,
-    those that differ from the defaults (the inverse of the CLI's ``settings_from_args``)."""
-    from ..session.pose_options import default_settings
-
-    d = default_settings()
+    those that differ from the defaults."""
+    d = PoseSettings()
     out: list[str] = []
     if settings.window != d.window:
         out += ["--window", str(settings.window)]
@@ -62,21 +76,23 @@ def pose_argv(settings: PoseSettings) -> list[str]:
     return out
 
 
-def fit_argv(state: FitSource, sensor: str, session: str, output: str, *, new: bool) -> list[str]:
-    """The ``triaxcal fit`` arguments (without ``triaxcal``) that fit ``sensor`` of
-    ``session`` with the live page's options."""
-    o = state.options
-    argv = ["fit", session, "--sensor", sensor]
-    if o.model != "auto":
-        argv += ["--model", o.model]
-    if o.sigma != 2.0:
-        argv += ["--sigma", repr(float(o.sigma))]
-    if o.rounds != 10:
-        argv += ["--rounds", str(o.rounds)]
-    if sensor == "accel":
-        argv += ["--poses", *pose_argv(state.detection), "--radius", o.accel_radius]
-    elif o.mag_radius is not None:
-        argv += ["--radius", o.mag_radius]
+def fit_argv(request: FitRequest, session: str, output: str, *, new: bool) -> list[str]:
+    """The ``triaxcal fit`` arguments (without ``triaxcal``) that make the same fit as
+    ``request`` -- shown on the page, so that a user can repeat Save from a terminal."""
+    d = FitRequest()
+    argv = ["fit", session, "--sensor", request.sensor]
+    if request.model != d.model:
+        argv += ["--model", request.model]
+    if request.outliers != d.outliers:
+        argv += ["--outliers", request.outliers]
+    if request.sigma != d.sigma:
+        argv += ["--sigma", repr(float(request.sigma))]
+    if request.rounds != d.rounds:
+        argv += ["--rounds", str(request.rounds)]
+    if request.source.poses:
+        argv += ["--poses", *pose_argv(request.source.detection)]
+    if request.radius is not None:
+        argv += ["--radius", str(request.radius)]
     argv += ["-o", output]
     if new:
         argv.append("--new")
@@ -98,26 +114,22 @@ def session_to_fit(state: FitSource) -> Path:
     return out
 
 
-def fit_session(state: FitSource, output: str | None = None) -> dict[str, FitOutcome]:
+def fit_saved_session(state: FitSource) -> dict[str, FitOutcome]:
     """Fit every sensor of the session as ``triaxcal fit`` does; ``{sensor: FitOutcome}``.
 
     Raises :class:`CalibrationError` when no sensor could be fitted (the messages of each)."""
-    from ..cli import build_parser
-    from ..session.fit import fit_file
+    from ..calibration.session import fit_session
 
     if not state.session.exists():
         raise CalibrationError(f"the session {state.session} does not exist yet: wait for data")
-    data = str(session_to_fit(state))
-    out = output or str(state.out_dir / "calibration.json")
-    parser = build_parser()
+    data = session_to_fit(state)
     outcomes: dict[str, FitOutcome] = {}
     errors: list[str] = []
     for sensor in ("accel", "mag"):
         if sensor not in state.cols:
             continue
-        args = parser.parse_args(fit_argv(state, sensor, data, out, new=not outcomes))
         try:
-            outcomes[sensor] = fit_file(args)
+            outcomes[sensor] = fit_session(data, fit_request(state, sensor))
         except CalibrationError as exc:
             errors.append(f"{sensor}: {exc}")
     if not outcomes:

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from ..detect.session import PoseSettings
 from ..errors import CalibrationError
-from ..fit import MODELS
-from ..poses import PoseSettings
+from ..fit.ellipsoid import MODELS
 
 __all__ = ["ACCEL_LIMITS", "SENSOR_COLUMNS", "LiveOptions"]
 
@@ -35,12 +35,12 @@ _MC_HELP = {"gaps": "empty regions of the sphere (MotionCal's 100)",
             "fit_error": "RMS of |calibrated| - radius, in % of the radius"}
 
 def _rects() -> list[list[float]]:
-    from ..coverage import sphere_cells
+    from ..quality.coverage import sphere_cells
 
     return [[round(v, 6) for v in r] for r in sphere_cells().rectangles()]
 
 
-#: The shared coverage cells (``triaxcal.coverage``) as (lon_lo, lon_hi deg, z_lo, z_hi).
+#: The shared coverage cells (``triaxcal.quality.coverage``) as (lon_lo, lon_hi deg, z_lo, z_hi).
 _RECTS = _rects()
 
 _TRAIL_HZ = 25.0
@@ -52,18 +52,23 @@ class LiveOptions:
     """How the live page fits, and where its buttons write.
 
     The fit options are ``triaxcal fit``'s, with its defaults: ``model`` (``"auto"``: by BIC),
-    ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius`` (as
-    ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
+    ``outliers``, ``sigma`` and ``rounds`` (outlier rejection), ``accel_radius`` and ``mag_radius``
+    (as ``--radius`` text, e.g. ``"1g"``, ``"50uT"``; ``None`` keeps the data's own scale),
     ``detection`` (the pose detection of ``capture`` and ``fit --poses``,
-    :class:`~triaxcal.poses.PoseSettings`; ``None``: the command line's defaults).
+    :class:`~triaxcal.detect.session.PoseSettings`; ``None``: the command line's defaults).
     ``gyro_counts_per_dps`` (``None``: 131, or 16 for ``Raw:``) only scales
     the displayed rates. ``mag_buffer`` is the size of the magnetometer's
     buffer of well-spread samples; ``refresh_hz`` how often the background thread refits and
     publishes. ``out_dir`` (default: the session's folder) receives ``calibration.json`` and
     the C headers, named with ``prefix``; ``send_timeout_s`` bounds the wait for a board's echo.
+    ``counts_per_unit`` (``{"accel": (16384, "g")}``) and ``sensor_model`` (part names such as
+    ``"MPU-6050:2g,250dps"``) give the board driver's scale for Send (the MotionCal packet is
+    in m/s^2, rad/s and uT); without them only ``Raw:`` lines, whose format fixes the scale,
+    can be sent.
     """
 
     model: str = "auto"
+    outliers: str = "robust"
     sigma: float = 2.0
     rounds: int = 10
     accel_radius: str = "1g"
@@ -75,13 +80,20 @@ class LiveOptions:
     out_dir: Path | None = None
     prefix: str = "triaxcal"
     send_timeout_s: float = 3.0
+    counts_per_unit: Any = None
+    sensor_model: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        from ..calibration.request import parse_radius
         from ..export._cgen import _ident
-        from ..session.fit import parse_radius
 
         if self.model not in (*MODELS, "auto"):
             raise CalibrationError(f"model must be one of {(*MODELS, 'auto')}, got {self.model!r}")
+        from ..calibration.request import OUTLIER_RULES
+
+        if self.outliers not in OUTLIER_RULES:
+            raise CalibrationError(f"outliers must be one of {OUTLIER_RULES}, got "
+                                   f"{self.outliers!r}")
         if not (isinstance(self.sigma, (int, float)) and self.sigma >= 0):
             raise CalibrationError(f"sigma must be >= 0, got {self.sigma!r}")
         for name, lo in (("rounds", 0), ("mag_buffer", 50)):
@@ -102,6 +114,11 @@ class LiveOptions:
         if not (isinstance(self.send_timeout_s, (int, float)) and self.send_timeout_s > 0):
             raise CalibrationError(f"send_timeout_s must be > 0, got {self.send_timeout_s!r}")
         _ident(self.prefix)
+        from ..export._trust import Scales
+
+        if isinstance(self.sensor_model, str):
+            object.__setattr__(self, "sensor_model", (self.sensor_model,))
+        Scales(self.counts_per_unit, tuple(self.sensor_model))  # checked now, not at Send
 
 
 def _jsonable(obj: Any) -> Any:

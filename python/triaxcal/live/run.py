@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
-from ..io.capture import CaptureResult, capture
+from ..capture.run import CaptureResult, capture
 from .server import DEFAULT_HOST, DEFAULT_PORT, LiveServer, check_live_extra
 from .state import LiveOptions, LiveState
 
@@ -105,7 +105,7 @@ class LivePage:
         return self
 
     def capture(self, **capture_kwargs: Any) -> CaptureResult:
-        """Run :func:`~triaxcal.io.capture.capture` feeding the page; when it ends by itself
+        """Run :func:`~triaxcal.capture.run.capture` feeding the page; when it ends by itself
         (not by Ctrl-C), fit the session as ``triaxcal fit`` does and show that."""
         result = capture(self.reader, self.out, on_records=self.state.on_records,
                          columns=self.columns, mode=self.mode, progress=self.progress,
@@ -155,14 +155,14 @@ def live_capture(
     mode: str = "new",
     **capture_kwargs: Any,
 ) -> CaptureResult:
-    """:func:`~triaxcal.io.capture.capture` with the live page served beside it.
+    """:func:`~triaxcal.capture.run.capture` with the live page served beside it.
 
     The capture runs as it does without the page (in this thread; Ctrl-C stops it with the
     session saved); the page is served from a background thread and refitted in another, so
     closing the browser changes nothing. When the capture ends by itself (``samples``,
     ``poses``, ``duration_s``, ``stop``) the page shows the session's fit and, with
     ``linger``, stays up until Ctrl-C. Other arguments as for :class:`LivePage` and
-    :func:`~triaxcal.io.capture.capture`.
+    :func:`~triaxcal.capture.run.capture`.
     """
     with LivePage(reader, out, columns=columns, options=options, host=host, port=port,
                   open_browser=open_browser, progress=progress, notices=notices,

@@ -1,6 +1,6 @@
 """The live state: fed by the capture thread, refitted in the background, read by the page.
 
-The capture loop (:func:`triaxcal.io.capture.capture`) hands every batch of records to
+The capture loop (:func:`triaxcal.capture.run.capture`) hands every batch of records to
 :meth:`LiveState.on_records`, which only updates bounded structures:
 
 * the accelerometer's still poses, found online by a :class:`~triaxcal.detect.PoseDetector`
@@ -11,8 +11,8 @@ The capture loop (:func:`triaxcal.io.capture.capture`) hands every batch of reco
 * thinned trails of the newest readings (25 per second, 10 s) and the stream's counters.
 
 A background thread (:meth:`LiveState.start`) refits several times a second what has arrived
-with the same Rust fits and options as ``triaxcal fit`` (:func:`triaxcal.select.fit_robust`:
-model choice by BIC, 2-sigma outlier rejection) and publishes one JSON document
+with the same Rust fits and options as ``triaxcal fit`` (:func:`triaxcal.fit.select.fit_robust`:
+model choice by BIC, the default outlier rule) and publishes one JSON document
 (:meth:`LiveState.document`, served as ``GET /api/state``) and the thinned point sets
 (:meth:`LiveState.points`). Nothing grows with the length of the capture except one small
 record per registered pose. When the capture ends, :meth:`LiveState.finish` fits the saved
@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from ..capture.run import _LivePoses
 from ..errors import CalibrationError
-from ..io.capture import _LivePoses
 from .options import (
     _MC_HELP,
     _MC_NAMES,
@@ -107,9 +107,9 @@ class LiveState:
         self.protocol = protocol
         self.port = port
         raw = protocol == "raw"
-        from ..session.pose_options import default_settings
+        from ..detect.session import PoseSettings
 
-        self.detection = opts.detection if opts.detection is not None else default_settings()
+        self.detection = opts.detection if opts.detection is not None else PoseSettings()
         #: nominal accelerometer counts per g (for display until the data decide it)
         self.nominal_counts_per_g = 8192.0 if raw else 16384.0
         self.gyro_cpd = float(opts.gyro_counts_per_dps or (16.0 if raw else 131.0))
@@ -121,7 +121,7 @@ class LiveState:
                 self.cols[sensor] = c
         if "accel" not in self.cols and len(names) >= 3:
             self.cols["accel"] = [0, 1, 2]
-        from ..session.fit import parse_radius
+        from ..calibration.request import parse_radius
 
         self.accel_radius, self.accel_unit = parse_radius(opts.accel_radius, "accel")
         if opts.mag_radius is not None:
@@ -258,12 +258,13 @@ class LiveState:
 
     # ----------------------------------------------------------------------- fitting
     def _fit_live(self, sensor: str, pts: np.ndarray) -> _Fit:
-        from ..select import fit_robust
+        from ..fit.select import fit_robust
 
         o = self.options
         radius = self.accel_radius if sensor == "accel" else self.mag_radius
         unit = self.accel_unit if sensor == "accel" else self.mag_unit
-        rob = fit_robust(pts, model=o.model, radius=radius, sigma=o.sigma,
+        rule = "sigma" if o.outliers == "magneto" else o.outliers
+        rob = fit_robust(pts, model=o.model, radius=radius, rule=rule, sigma=o.sigma,
                          max_rounds=o.rounds, lengths="calibrated")
         f = rob.fit
         return _Fit(model=f.model, offset=np.array(f.offset), matrix=np.array(f.matrix),
@@ -360,7 +361,7 @@ class LiveState:
         return d
 
     def _build(self, poses: np.ndarray) -> tuple[dict[str, Any], dict[str, Any]]:
-        from ..coverage import suggest_turn
+        from ..quality.coverage import suggest_turn
 
         now = time.monotonic()
         with self._lock:
@@ -479,7 +480,8 @@ class LiveState:
             "actions": {"last": self.last_action,
                         "send_possible": self._reader is not None and not getattr(
                             self._reader, "polled", False) and self.status == "capturing"},
-            "options": {"model": self.options.model, "sigma": self.options.sigma,
+            "options": {"model": self.options.model, "outliers": self.options.outliers,
+                        "sigma": self.options.sigma,
                         "rounds": self.options.rounds, "accel_radius": self.options.accel_radius,
                         "mag_radius": self.options.mag_radius,
                         "detection": self.detection.to_dict(),
@@ -496,7 +498,7 @@ class LiveState:
         """Coverage, the biggest empty cap and the quality checks of one sensor; recomputed
         when its points or fit changed, at most 4 times a second (the cap search is the
         costly part)."""
-        from ..coverage import coverage, sphere_cells
+        from ..quality.coverage import coverage, sphere_cells
         from ..report import direction_words
 
         now = time.monotonic()
@@ -571,14 +573,14 @@ class LiveState:
 
     def fit_commands(self) -> list[str]:
         """The ``triaxcal fit`` commands that Save runs (on the session as it is)."""
-        from .fitting import fit_argv
+        from .fitting import fit_argv, fit_request
 
         out = str(self.out_dir / "calibration.json")
         cmds = []
         first = True
         for sensor in ("accel", "mag"):
             if sensor in self.cols:
-                argv = fit_argv(self, sensor, str(self.session), out, new=first)
+                argv = fit_argv(fit_request(self, sensor), str(self.session), out, new=first)
                 cmds.append("triaxcal " + " ".join(_quote(a) for a in argv))
                 first = False
         return cmds
@@ -672,7 +674,7 @@ class LiveState:
     def finish(self, result: Any = None) -> None:
         """The capture ended: fit the saved session exactly as ``triaxcal fit`` does (the
         accelerometer with ``--poses``, the magnetometer on every row) and publish that."""
-        from .fitting import fit_session
+        from .fitting import fit_saved_session
 
         self.finish_poses()
         with self._lock:
@@ -681,7 +683,7 @@ class LiveState:
         self.refresh()
         error = None
         try:
-            outcomes = fit_session(self)
+            outcomes = fit_saved_session(self)
         except CalibrationError as exc:
             error = str(exc)
             outcomes = {}

@@ -13,9 +13,9 @@ of a three-axis magnetometer ... and alignment with an accelerometer", 2012): a 
 start (``a_i^T R m_i`` is linear in the nine entries of ``R``), 24 right-angle starts, then
 Gauss-Newton on the rotation (three small angles) and the dip. It reports the dip angle and
 its spread over the poses before (``R = I``) and after, and the nearest of the 24 right-angle
-mountings (:mod:`triaxcal.rotations`) with the angle between them -- a mounting rotation, as
-ArduPilot and PX4 detect for external compasses. Turns about one axis only leave the rotation
-about that axis undetermined; the standard errors say so.
+mountings (:mod:`triaxcal.conventions.rotations`) with the angle between them -- a mounting
+rotation, as ArduPilot and PX4 detect for external compasses. Turns about one axis only leave the
+rotation about that axis undetermined; the standard errors say so.
 
 Heading: with ``u`` the unit up vector and ``n`` the horizontal part of the field (both in the
 accelerometer frame), the heading of a body axis ``b`` is the angle from magnetic north to the
@@ -34,15 +34,15 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points
-from ..errors import CalibrationError
-from ..rotations import (
+from .._checks.arrays import as_points
+from ..conventions.rotations import (
     MAX_MOUNTING_DEG,
     MOUNTINGS,
     Mounting,
     nearest_mounting,
     rotation_angle_deg,
 )
+from ..errors import CalibrationError
 
 __all__ = [
     "MAX_MOUNTING_DEG",
@@ -305,7 +305,7 @@ def paired_still_poses(mag: Any, accel: Any, *, window: int = 25,
 
 
 def _units_per_g(accel_cal: Any) -> float:
-    from ..units import unit_factor
+    from ..conventions.units import unit_factor
 
     unit = getattr(accel_cal, "unit", "g") if accel_cal is not None else "g"
     try:

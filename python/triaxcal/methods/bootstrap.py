@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points
+from .._checks.arrays import as_points
 from ..errors import CalibrationError
-from ..fit import EllipsoidFit, fit_batch, fit_ellipsoid
+from ..fit.ellipsoid import EllipsoidFit, fit_batch, fit_ellipsoid
 
 __all__ = ["BootstrapIntervals", "bootstrap", "fit_params"]
 

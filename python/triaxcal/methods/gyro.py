@@ -1,12 +1,15 @@
-"""Gyroscope calibration: bias at rest, gain by integrating known rotations, turntable fits.
+"""Gyroscope calibration: bias at rest, gain by integrating known rotations (turntable fits:
+:mod:`triaxcal.methods.turntable`).
 
-Error model (per axis, the seed gyro-integration-calibration.txt): a raw reading ``w`` (counts)
+Error model (per axis, as the turn-integration method writes it): a raw reading ``w`` (counts)
 of a true rate ``r`` (deg/s) is ``w = offset + gain * r``; ``gain`` is in **counts per deg/s**
 and **divides**: ``r = (w - offset) / gain``. Its inverse, ``scale = 1 / gain`` in **deg/s per
-count**, multiplies. (The seed's readers mixed the two up: MPU-6050 at +-2000 deg/s has a
+count**, multiplies. (Readers of the turn-integration method mixed the two up: MPU-6050 at +-2000
+deg/s has a
 gain of 16.4 counts per deg/s, i.e. a scale of 0.061 deg/s per count.) The full 3x3 model,
 ``rate = (w - offset) @ matrix.T`` with ``matrix`` in rad/s per count, is fitted by
-:func:`triaxcal.calibrate_imu` (rotations between still poses) and :func:`fit_turntable`
+:func:`triaxcal.calibrate_imu` (rotations between still poses) and
+:func:`~triaxcal.methods.turntable.fit_turntable`
 (constant-rate plateaus of known magnitude).
 
 Rotation sense: a rotation with a positive integral about +axis is counterclockwise seen from
@@ -15,16 +18,20 @@ the tip of that axis (right-hand rule), ``"ccw"``; a negative one is clockwise, 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
-from .._validate import as_samples
-from ..detect import Rejection, detect_poses, detect_still
+from .._checks import options as opt
+from .._checks.arrays import as_samples
+from .._checks.spelling import opt as flag
+from ..detect import Rejection, detect_still
 from ..errors import CalibrationError
+from ..quality.bounds import GYRO_SATURATION_COUNTS
+from .turntable import TurntableFit, fit_turntable, turntable_plateaus
 
 __all__ = [
     "GyroBias",
@@ -33,9 +40,11 @@ __all__ = [
     "TurntableFit",
     "find_rotations",
     "fit_turntable",
+    "gain_warnings",
     "gyro_bias",
     "gyro_gains",
     "integrate_rate",
+    "sample_rate",
     "turntable_plateaus",
 ]
 
@@ -87,6 +96,30 @@ def _mean_rate(tt: np.ndarray) -> float:
     a true 100 Hz), and the median step would make a detector window five times too short.
     """
     return (tt.shape[0] - 1) / float(tt[-1] - tt[0])
+
+
+def sample_rate(t: Any = None, rate_hz: float | None = None) -> float:
+    """The sampling rate, Hz: ``rate_hz`` when given, else the samples per second of the time
+    stamps ``t`` over the whole recording (see :func:`find_rotations` on loggers that stamp in
+    bursts).
+
+    >>> sample_rate([0.0, 0.01, 0.02, 0.04]), sample_rate(rate_hz=200)
+    (75.0, 200.0)
+    """
+    if rate_hz is not None:
+        return opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
+    if t is None:
+        raise CalibrationError("the recording has no time stamps (a t column): give its "
+                               f"sampling rate ({flag('rate_hz')}, Hz)")
+    arr = np.asarray(t) if not isinstance(t, (str, bytes)) else np.asarray([t])
+    if arr.dtype.kind not in "iuf":
+        raise CalibrationError(f"t must hold real numbers (seconds), got dtype {arr.dtype}")
+    tt = arr.astype(np.float64).reshape(-1)
+    span = float(tt[-1] - tt[0]) if tt.shape[0] > 1 else 0.0
+    if not (math.isfinite(span) and span > 0):
+        raise CalibrationError("the time stamps do not advance: give the sampling rate "
+                               f"({flag('rate_hz')}, Hz)")
+    return (tt.shape[0] - 1) / span
 
 
 def integrate_rate(rate: Any, t: Any) -> np.ndarray:
@@ -256,8 +289,11 @@ def find_rotations(
         ``None``: every gap between two still periods is a rotation. ``"whole"``: one rotation
         from the end of the first still period to the start of the last one (a rest at the
         start and at the end, the turns in between without pauses: any slow-down in the
-        middle is part of the turn). A sequence: these sample intervals (end exclusive) are
-        the rotations, whatever the detector says; give ``offset`` (from a recording at rest,
+        middle is part of the turn); with ``offset`` given and no ``intervals``, the whole
+        recording from its first to its last sample (turns that start and end in motion, the
+        bias from a recording at rest; a rest at either end adds only its noise, the offset
+        being removed). A sequence: these sample intervals (end exclusive) are the rotations,
+        whatever the detector says; give ``offset`` (from a recording at rest,
         :func:`gyro_bias`) if the recording has no still period of its own.
     rest_s, window_s, k, min_still_s
         Options of the still detector (:func:`triaxcal.detect_still`), seconds.
@@ -283,13 +319,16 @@ def find_rotations(
         explicit = opt.intervals(turns, "turns", g.shape[0])
         if not explicit:
             raise CalibrationError("turns is empty: give at least one (start, end) interval")
+    if explicit is None and turns == WHOLE and off is not None and intervals is None:
+        # the bias is known: the whole recording is the turn (no rest needed at either end)
+        explicit = [(0, g.shape[0])]
     if explicit is not None:
         if off is None:
             iv = _still_periods(g, tt, intervals, rest, win, kk, min_still)
             if not iv:
                 raise CalibrationError(
-                    "no still period to take the gyro offset from: pass offset= (the mean "
-                    "of a recording at rest, triaxcal.gyro_bias(rest).offset)"
+                    f"no still period to take the gyro offset from: give it ({flag('offset')}: "
+                    "the mean of a recording at rest, triaxcal.gyro_bias)"
                 )
             off = gyro_bias(g, intervals=iv).offset
         cum = integrate_rate(g - off, tt)
@@ -299,7 +338,8 @@ def find_rotations(
         raise CalibrationError(
             f"found {len(iv)} still period(s); rotations are measured between two still periods: "
             "hold the sensor still before and after every rotation (for a recording that turns "
-            "without pausing, pass turns=[(start, end)] and the offset from a recording at rest)"
+            f"without pausing, pass {flag('turns', WHOLE)} and the bias from a recording at "
+            f"rest, {flag('offset')})"
         )
     if off is None:
         off = gyro_bias(g, intervals=iv).offset
@@ -380,7 +420,7 @@ def gyro_gains(
     nominal_counts_per_dps: float | None = None,
     axes: str = "xyz",
 ) -> GyroGains:
-    """Gyro gain per axis and direction by integrating rotations of a known angle (the seed).
+    """Gyro gain per axis and direction by integrating rotations of a known angle.
 
     Turn the sensor by ``angle_deg`` (90 on a cube; 360 or more is better) about each of its
     axes, both ways, holding it still before and after each turn. Each rotation is found
@@ -403,8 +443,9 @@ def gyro_gains(
         Which samples are the rotations (see :func:`find_rotations`): ``None``, each gap
         between still periods; ``"whole"``, everything between a rest at the start and a rest
         at the end (continuous turns, e.g. two 360 deg turns in a row with
-        ``angle_deg=720``); or explicit sample intervals, each one turn of ``angle_deg``
-        (with ``offset`` from a recording at rest when this one never rests).
+        ``angle_deg=720``), or with ``offset`` given the whole recording (turns that never
+        rest, the bias from a recording at rest); or explicit sample intervals, each one turn
+        of ``angle_deg`` (with ``offset`` from a recording at rest when this one never rests).
     rest_s : float
         Initial rest, s, from which the still detector learns the noise.
     min_fraction, max_fraction : float
@@ -414,7 +455,7 @@ def gyro_gains(
     min_purity : float
         Rotations with less than this share of the integral on one axis are rejected.
     require_both_directions : bool
-        Raise unless every axis was turned both ways (the seed's six rotations).
+        Raise unless every axis was turned both ways (the six turns of the turn-integration method).
     nominal_counts_per_dps : float, optional
         The datasheet gain (131 for an MPU-6050 at +-250 deg/s), used to judge which rotations
         are too small or too large; ``None``: taken from the larger rotations found.
@@ -465,10 +506,11 @@ def gyro_gains(
         )
     need = [AXES.index(c) for c in AXES if c in axes]
     explicit = turns is not None and not isinstance(turns, str)
+    iv: list[tuple[int, int]] | None
     if intervals is not None:
         iv = opt.intervals(intervals, "intervals", g.shape[0])
-    elif explicit and off is not None:
-        iv = []  # nothing to detect: the turns and the offset are given
+    elif (explicit or turns == WHOLE) and off is not None:
+        iv = None  # nothing to detect: the turns and the offset are given
     else:
         iv = detect_still(g, rate_hz=_mean_rate(tt), window_s=0.5, rest_s=rest, k=4.0,
                           min_duration_s=0.5).intervals
@@ -522,7 +564,8 @@ def gyro_gains(
             f"for {', '.join(no_axis)} (used: {', '.join(r.label for r in used) or 'none'}; "
             f"rejected: {why or 'none'}); turn the sensor about each axis by {ang:g} deg, "
             "both ways, holding it still before and after (turns without a pause: pass "
-            "turns='whole' or turns=[(start, end)]; a recording about one axis: axes='z')"
+            f"{flag('turns', WHOLE)}, and {flag('offset')} when the recording does not rest at "
+            f"both ends; a recording about one axis: {flag('axes', 'z')})"
         )
     if both and missing:
         raise CalibrationError(
@@ -546,159 +589,57 @@ def gyro_gains(
     )
 
 
-# --- turntable: constant-rate plateaus of known magnitude --------------------------------------
+def _asymmetry_cause(cw: float, ccw: float, peaks: dict[str, float], angle: float) -> str:
+    """The likely reason why an axis's two directions disagree."""
+    sat = [d for d, v in peaks.items() if v >= GYRO_SATURATION_COUNTS]
+    if sat:
+        return (f"the {' and '.join(sat)} turn saturated the gyro (|raw| reached "
+                f"{max(peaks.values()):.0f}): turn more slowly or choose a larger range")
+    mean = 0.5 * (cw + ccw)
+    return (f"the turns were probably not the same angle both ways (at the mean gain the "
+            f"clockwise ones measure {angle * cw / mean:.1f} deg, the counter-clockwise ones "
+            f"{angle * ccw / mean:.1f}): turn against a fixed stop, e.g. from one face of a cube "
+            "to the next on a flat table; a bias that drifted between the turns does this too "
+            "(hold still longer, or fit the temperature drift)")
 
 
-def turntable_plateaus(
-    gyro: Any,
-    *,
-    min_rate: float,
-    window: int = 50,
-    threshold: float | None = None,
-    min_windows: int = 4,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Constant-rate plateaus of a turntable recording: means (M, 3) and sample counts (M,).
+def gain_warnings(gains: GyroGains, gyro: Any, *, max_asymmetry_pct: float = 3.0,
+                  raw_unit: str = "counts") -> list[str]:
+    """What a person should know about :func:`gyro_gains`' result, in words.
 
-    A plateau is a run of windows whose mean rate vector stays within ``threshold`` (input
-    units; default 1 % of ``min_rate``) -- the seed's stillness test applied to the gyro --
-    with a magnitude of at least ``min_rate`` (spin-up, spin-down and reorientation pauses
-    are dropped).
-    """
-    g = _as_rate(gyro)
-    low = opt.number(min_rate, "min_rate", gt=0, hint="the slowest plateau, gyro units")
-    thr = 0.01 * low if threshold is None else opt.number(threshold, "threshold", gt=0)
-    det = detect_poses(g, window=window, threshold=thr, min_separation=0.0,
-                       min_windows=min_windows, max_std=10 * thr)
-    keep = [p for p in det.poses if np.linalg.norm(p.mean[:3]) >= low]
-    if not keep:
-        return np.zeros((0, 3)), np.zeros(0, dtype=int)
-    return np.array([p.mean[:3] for p in keep]), np.array([p.n for p in keep])
-
-
-@dataclass(frozen=True)
-class TurntableFit:
-    """Gyro calibration from turntable plateaus of known rate.
-
-    ``calibrated = (raw - offset) @ matrix.T`` is in the units of ``rates`` (rad/s if the rates
-    were given in rad/s); ``matrix`` multiplies. ``measured`` lists each recording's plateau
-    magnitudes after calibration (mean over its plateaus), ``raw_measured`` the same before
-    (offset removed only), ``rel_error`` = measured / rate - 1 per recording.
-    """
-
-    offset: np.ndarray
-    matrix: np.ndarray
-    rates: np.ndarray
-    measured: np.ndarray
-    raw_measured: np.ndarray
-    rel_error: np.ndarray
-    n_plateaus: tuple[int, ...]
-    rms_rel: float
-
-    def apply(self, raw: Any) -> np.ndarray:
-        """``(raw - offset) @ matrix.T``."""
-        return (np.asarray(raw, dtype=np.float64) - self.offset) @ self.matrix.T
-
-
-def fit_turntable(
-    recordings: Sequence[Any],
-    rates: Sequence[float],
-    *,
-    offset: Any,
-    model: str = "full",
-    window: int = 50,
-    min_fraction: float = 0.9,
-) -> TurntableFit:
-    """Fit the gyro gain matrix from turntable recordings of known rate.
-
-    With the sensor placed on a turntable in several orientations, each orientation gives a
-    plateau: a constant body-frame rate vector ``w`` whose true magnitude is the table's rate.
-    With the bias ``offset`` known (from a recording at rest), ``u = (w - offset) / rate``
-    satisfies ``u.T @ A @ u = 1`` with ``A = matrix.T @ matrix``: linear least squares in the
-    six entries of ``A`` (three for ``model="axis"``), then ``matrix`` is the symmetric square
-    root of ``A``.
+    An axis whose clockwise and counter-clockwise gains differ by more than
+    ``max_asymmetry_pct`` percent, with the likely cause (a turn that saturated the gyro --
+    :data:`~triaxcal.quality.bounds.GYRO_SATURATION_COUNTS` -- or turns of unequal angle), and
+    every direction not turned.
 
     Parameters
     ----------
-    recordings : sequence of array_like (Ni, 3)
-        Gyro readings, one array per turntable speed.
-    rates : sequence of float
-        The true rate of each recording (rad/s for a result in rad/s; 33 1/3 rpm = 3.4907 rad/s).
-    offset : array_like (3,)
-        Gyro bias, in the readings' units (see :func:`gyro_bias`).
-    model : {"full", "axis"}
-        Symmetric 3x3 matrix or per-axis scales.
-    window : int
-        Samples per averaging window of the plateau detection.
-    min_fraction : float
-        Plateaus slower than ``min_fraction * rate`` are spin-up/down and are dropped.
-
-    Returns
-    -------
-    TurntableFit
+    gains : GyroGains
+    gyro : array_like (N, 3)
+        The readings the gains were found in (for the peaks of each turn).
+    max_asymmetry_pct : float
+        Largest difference between the two directions' gains, percent, before a warning.
+    raw_unit : str
+        Unit of the readings, for the messages.
     """
-    opt.choice(model, "model", ("full", "axis"))
-    rr_list = opt.numbers_list(rates, "rates", min_len=0, gt=0, hint="the table's rate, rad/s")
-    if (isinstance(recordings, (str, bytes)) or len(recordings) != len(rr_list)
-            or not rr_list):
-        raise CalibrationError("give one rate per recording (and at least one recording)")
-    off = opt.vector3(offset, "offset", hint="gyro bias, in the readings' units")
-    win = opt.integer(window, "window", ge=1, hint="samples per averaging window")
-    frac = opt.number(min_fraction, "min_fraction", gt=0, le=1)
-    us, which, counts = [], [], []
-    for i, (rec, rate) in enumerate(zip(recordings, rr_list)):
-        g = _as_rate(rec, name=f"recordings[{i}]") - off
-        means, _ = turntable_plateaus(g, min_rate=frac * rate, window=win)
-        if len(means) == 0:
-            raise CalibrationError(
-                f"recordings[{i}]: no constant-rate plateau near {rate:g}; is the table turning, "
-                "and is the rate in the gyro's units?"
-            )
-        us.append(means / rate)
-        which += [i] * len(means)
-        counts.append(len(means))
-    u = np.vstack(us)
-    need = 6 if model == "full" else 3
-    if u.shape[0] < need:
-        raise CalibrationError(
-            f"{u.shape[0]} plateaus found, the {model!r} model needs at least {need} orientations "
-            "of the sensor on the table (tilt it differently for each)"
-        )
-    if model == "full":
-        design = np.column_stack([u[:, 0] ** 2, u[:, 1] ** 2, u[:, 2] ** 2, 2 * u[:, 0] * u[:, 1],
-                                  2 * u[:, 0] * u[:, 2], 2 * u[:, 1] * u[:, 2]])
-    else:
-        design = u**2
-    sv = np.linalg.svd(design / np.linalg.norm(design, axis=0), compute_uv=False)
-    if sv[-1] < 1e-6 * sv[0]:
-        raise CalibrationError(
-            "the plateaus do not span enough directions of the rate vector for the "
-            f"{model!r} model: place the sensor on the table in more varied orientations"
-        )
-    coef, *_ = np.linalg.lstsq(design, np.ones(u.shape[0]), rcond=None)
-    if model == "full":
-        a = np.array([[coef[0], coef[3], coef[4]], [coef[3], coef[1], coef[5]],
-                      [coef[4], coef[5], coef[2]]])
-    else:
-        a = np.diag(coef)
-    ev, evec = np.linalg.eigh(a)
-    if ev.min() <= 0:
-        raise CalibrationError("the fitted gain matrix is not positive definite: check the data")
-    m = (evec * np.sqrt(ev)) @ evec.T
-    which_a = np.array(which)
-    cal = np.linalg.norm(u @ m.T, axis=1)
-    rawn = np.linalg.norm(u, axis=1)
-    rr = np.asarray(rates, dtype=np.float64)
-    meas = np.array([cal[which_a == i].mean() for i in range(len(rates))]) * rr
-    rawm = np.array([rawn[which_a == i].mean() for i in range(len(rates))]) * rr
-    return TurntableFit(
-        offset=_ro(off),
-        matrix=_ro(m),
-        rates=_ro(rr),
-        measured=_ro(meas),
-        raw_measured=_ro(rawm),
-        rel_error=_ro(meas / rr - 1),
-        n_plateaus=tuple(counts),
-        rms_rel=float(np.sqrt(np.mean((cal - 1) ** 2))),
-    )
-
-
+    g = _as_rate(gyro)
+    limit = opt.number(max_asymmetry_pct, "max_asymmetry_pct", ge=0)
+    out: list[str] = []
+    for i, ax in enumerate(AXES):
+        cw, ccw = float(gains.gain_cw_counts_per_dps[i]), float(gains.gain_ccw_counts_per_dps[i])
+        asym = float(gains.asymmetry[i])
+        if not (math.isfinite(asym) and abs(asym) * 100 > limit):
+            continue
+        peaks: dict[str, float] = {}
+        for r in gains.rotations:
+            if r.axis == i:
+                d = "counter-clockwise" if r.direction == "ccw" else "clockwise"
+                peaks[d] = max(peaks.get(d, 0.0), float(np.abs(g[r.start:r.end, i]).max()))
+        why = _asymmetry_cause(cw, ccw, peaks, gains.angle_deg)
+        out.append(f"{ax}: clockwise {cw:.4g} and counter-clockwise {ccw:.4g} {raw_unit} per "
+                   f"deg/s differ by {abs(asym) * 100:.1f} %: {why}")
+    for m in gains.missing:
+        ax, d = m.split()
+        out.append(f"no {'counter-clockwise' if d == 'ccw' else 'clockwise'} turn about "
+                   f"{ax}: its gain is from one direction only")
+    return out

@@ -50,11 +50,11 @@ from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
-from .._validate import as_samples
+from .._checks import options as opt
+from .._checks.arrays import as_samples
 from ..detect import detect_still
 from ..errors import CalibrationError
-from ..fit import fit_ellipsoid
+from ..fit.ellipsoid import fit_ellipsoid
 
 __all__ = ["ImuCalibration", "SweepStep", "TriadCalibration", "calibrate_imu", "rotate_gravity"]
 

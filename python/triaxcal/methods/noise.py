@@ -36,6 +36,7 @@ them itself with ``update_rate`` (``sigma_d = N / sqrt(1 / update_rate)``). It r
 from __future__ import annotations
 
 import importlib.util
+import io
 import itertools
 import math
 from dataclasses import dataclass, field
@@ -44,8 +45,11 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
+from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
-from ..units import UNITS, unit_factor
+from ..io.files import write_file
+from ..quality.bounds import SAMPLE_RATE_HZ
 from .allan import AllanDeviation, allan
 
 __all__ = [
@@ -177,6 +181,10 @@ class NoiseFigures:
         The Allan deviation the figures were fitted to.
     warnings : tuple of str
         Plain-language warnings: figures the log is too short for, and what to do.
+    motion : str or None
+        Set when the figures were computed although the readings were not at rest (what the
+        at-rest test found, :mod:`triaxcal.methods.rest`): they describe the motion as much as
+        the sensor, and every output says so.
     """
 
     sensor: str | None
@@ -186,6 +194,7 @@ class NoiseFigures:
     axes: tuple[AxisNoise, ...]
     allan: AllanDeviation
     warnings: tuple[str, ...] = ()
+    motion: str | None = None
 
     def worst(self, term: str) -> float:
         """The largest value of ``term`` over the axes (what a filter should assume)."""
@@ -210,12 +219,16 @@ class NoiseFigures:
         return self.axes[axis]
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON values (the figures per axis, in :attr:`unit`)."""
-        return {
+        """Plain JSON values (the figures per axis, in :attr:`unit`). A value that is not a
+        finite number -- the relative uncertainty of a term the fit left at zero -- is None
+        (JSON null), and ``"null"`` says so."""
+        d = {
             "sensor": self.sensor,
             "unit": self.unit,
             "rate_hz": self.rate_hz,
             "duration_s": self.duration_s,
+            "at_rest": self.motion is None,
+            "motion": self.motion,
             "axes": {
                 a.axis: {
                     **{t: a.value(t) for t in TERMS},
@@ -231,11 +244,25 @@ class NoiseFigures:
                 for a in self.axes
             },
             "warnings": list(self.warnings),
+            "null": "a value that is not a finite number: a relative uncertainty (rel_err) of a "
+                    "term the fit left at zero has none",
         }
+        return _finite(d)
 
     def text(self) -> str:
         """The figures as console text, both conventions side by side."""
         return _text(self)
+
+
+def _finite(v: Any) -> Any:
+    """``v`` with every float that is not finite replaced by None (JSON null)."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v
 
 
 def noise_figures(
@@ -302,7 +329,23 @@ def noise_figures(
             f"the Allan deviation has only {len(ad.taus)} averaging times: the log is too short "
             "for noise figures (record at least a few minutes at rest)"
         )
-    axes = tuple(_fit_axis(ad, k, cols) for k in range(len(ad.axes)))
+    if not np.isfinite(ad.adev).all():
+        raise CalibrationError(
+            "the Allan deviation overflows a double: readings this large are not a sensor's "
+            "(a wrong column, unit or scale?)"
+        )
+    lo, hi = SAMPLE_RATE_HZ
+    if not (lo <= ad.rate_hz <= hi and np.isfinite(_basis(ad.taus)).all()):
+        raise CalibrationError(
+            f"a sample rate of {ad.rate_hz:g} Hz puts the averaging times at {ad.taus[0]:.3g} .. "
+            f"{ad.taus[-1]:.3g} s, beyond what the noise model can hold: give the rate in Hz "
+            f"({opt('rate_hz')}: {lo:g} to {hi:g})"
+        )
+    try:
+        axes = tuple(_fit_axis(ad, k, cols) for k in range(len(ad.axes)))
+    except np.linalg.LinAlgError as exc:
+        raise CalibrationError(f"the Allan deviation could not be fitted ({exc}): is the log at "
+                               "rest and its rate right?") from None
     warnings = _warnings(ad, axes, sensor)
     return NoiseFigures(sensor=sensor, unit=ad.unit, rate_hz=ad.rate_hz,
                         duration_s=ad.duration_s, axes=axes, allan=ad,
@@ -478,7 +521,8 @@ def _text(nf: NoiseFigures) -> str:
     names = _NAMES[nf.sensor]
     lines = [
         f"{nf.sensor or 'sensor'} noise figures: {nf.allan.n} samples at {f:g} Hz "
-        f"({_hours(nf.duration_s)}), unit {u}",
+        f"({_hours(nf.duration_s)}), unit {u}"
+        + ("  -- NOT AT REST: computed anyway, see warnings" if nf.motion else ""),
         f"  {'':28}{'continuous time':<58}discrete time (per sample at {f:g} Hz)",
     ]
     for a in nf.axes:
@@ -559,23 +603,48 @@ def kalibr_noise(
     return out
 
 
+def _yaml_float(v: float) -> str:
+    """A float as YAML 1.1 reads a float (``yaml.safe_load``, which Kalibr's config reader
+    uses): with a decimal point and a signed exponent (``2.000000e-05``, never ``2e-05``, which
+    it reads as a string).
+
+    >>> _yaml_float(2e-05), _yaml_float(50.0), _yaml_float(204.8)
+    ('2.000000e-05', '50.0', '204.8')
+    """
+    f = float(v)
+    text = repr(f)
+    if "e" in text or "E" in text or "." not in text:
+        text = f"{f:.6e}"
+    return text
+
+
 def kalibr_yaml(
     gyro: NoiseFigures | None = None,
     accel: NoiseFigures | None = None,
     *,
-    rostopic: str = "/imu0",
+    ros_topic: str = "/imu0",
     update_rate: float | None = None,
+    rostopic: str | None = None,
 ) -> str:
     """The noise block of a Kalibr ``imu.yaml`` (with ``rostopic`` and ``update_rate``).
 
-    Comments give the units and say which values are upper bounds.
+    Comments give the units and say which values are upper bounds, and that the figures are
+    of readings that were not at rest when they are (:attr:`NoiseFigures.motion`). Every number
+    is written so that ``yaml.safe_load`` reads a float. ``rostopic`` is the old name of
+    ``ros_topic``.
     """
+    if rostopic is not None:
+        import warnings
+
+        warnings.warn("kalibr_yaml(rostopic=) is now ros_topic=; the old name goes in the next "
+                      "release", DeprecationWarning, stacklevel=2)
+        ros_topic = rostopic
     keys = kalibr_noise(gyro, accel)
     rate = update_rate or (gyro or accel).rate_hz  # type: ignore[union-attr]
-    if not (isinstance(rostopic, str) and rostopic.startswith("/")
-            and all(ch.isalnum() or ch in "/_" for ch in rostopic)):
-        raise CalibrationError(f"rostopic must look like /imu0 (letters, digits, _ and /), got "
-                               f"{rostopic!r}")
+    if not (isinstance(ros_topic, str) and ros_topic.startswith("/")
+            and all(ch.isalnum() or ch in "/_" for ch in ros_topic)):
+        raise CalibrationError(f"{opt('ros_topic')} must look like /imu0 (letters, digits, _ "
+                               f"and /), got {ros_topic!r}")
     units = {"gyroscope_noise_density": "rad/s/sqrt(Hz)",
              "gyroscope_random_walk": "rad/s^2/sqrt(Hz)",
              "accelerometer_noise_density": "m/s^2/sqrt(Hz)",
@@ -586,14 +655,17 @@ def kalibr_yaml(
         if nf is None:
             lines.append(f"# {prefix}_noise_density, {prefix}_random_walk: not measured")
             continue
+        if nf.motion:
+            lines.append(f"# NOT AT REST: the {prefix} figures were computed from readings that "
+                         "moved; they describe the motion as much as the sensor")
         for key in ("noise_density", "random_walk"):
             term = "white" if key == "noise_density" else "random_walk"
             note = "" if all(a.resolved[term] for a in nf.axes) else (
                 "; an upper bound: the log does not resolve it")
             name = f"{prefix}_{key}"
-            lines.append(f"{name}: {keys[name]:.6e}  # {units[name]}{note}")
-    lines.append(f"rostopic: {rostopic}")
-    lines.append(f"update_rate: {float(rate):.6g}  # Hz")
+            lines.append(f"{name}: {_yaml_float(keys[name])}  # {units[name]}{note}")
+    lines.append(f"rostopic: {ros_topic}")
+    lines.append(f"update_rate: {_yaml_float(rate)}  # Hz")
     return "\n".join(lines) + "\n"
 
 
@@ -675,6 +747,6 @@ def plot_allan(nf: NoiseFigures, path: str | Path, *, title: str | None = None,
                      fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.14), frameon=False)
-    out = Path(path)
-    fig.savefig(out, format="png", dpi=dpi)
-    return out
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return write_file(path, buf.getvalue(), what="figure")  # atomic: no half-written figure

@@ -21,13 +21,14 @@ Ferraris, and how imucal's names map onto ours (imucal ``FerrarisCalibration.com
   and the sense is read from the data (``rotation_sign``), so imucal with
   ``expected_angle = rotation_sign * angle_deg`` gives the same matrices.
 
-Tilt rig (tilt-rig-gravity-calibration.txt), with the algebra checked: a reading ``s`` taken
+Tilt rig (the two-tilt method), with the algebra checked: a reading ``s`` taken
 with an axis tilted down by ``theta`` and ``s'`` tilted up by ``theta`` see ``+-sin(theta)`` g,
 so ``gain * (s - offset) = sin(theta)`` and ``gain * (s' - offset) = -sin(theta)``, giving
 
     offset = (s + s') / 2,        gain = 2 sin(theta) / |s - s'|.
 
-The seed writes ``g = sin(theta) / (s + o)``, i.e. it adds the offset it should subtract; its
+The published tilt-rig algebra writes ``g = sin(theta) / (s + o)``, i.e. it adds the offset it
+should subtract; its
 published x and y gains (1.2856, 1.3334) are therefore ~12-15 % too high. The vertical axis sees
 ``cos(theta)`` in every tilt, so its offset cannot be told from its gain without an upside-down
 reading: it is taken as 0 (or given) and ``gain_z = cos(theta) / (mean(s_z) - offset_z)``.
@@ -44,9 +45,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
-from .._validate import as_samples
+from .._checks import options as opt
+from .._checks.arrays import as_samples
 from ..errors import CalibrationError
+from ..io.sections import FERRARIS_SECTIONS, TILT_SECTIONS
 from .imu import TriadCalibration
 
 __all__ = [
@@ -59,8 +61,9 @@ __all__ = [
 ]
 
 AXES = "xyz"
-FERRARIS_SECTIONS = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a", "x_rot", "y_rot", "z_rot")
-TILT_KEYS = ("fore_down", "aft_down", "left_down", "right_down")
+#: The four tilts (their names, like the Ferraris sections', live where their files are read:
+#: :mod:`triaxcal.io.sections`).
+TILT_KEYS = TILT_SECTIONS
 
 
 def _ro(a: Any) -> np.ndarray:
@@ -116,7 +119,7 @@ class TiltRig:
 def tilt_rig(
     readings: Mapping[str, Any], *, angle_deg: float, z_offset: float = 0.0
 ) -> TiltRig:
-    """Offsets and gains from readings on a rig tilted by a known angle (the seed's method).
+    """Offsets and gains from readings on a rig tilted by a known angle (the two-tilt method).
 
     Parameters
     ----------
@@ -125,7 +128,7 @@ def tilt_rig(
         ``right_down`` (y axis tilted ...): each a reading (3,) or several (N, 3), in g (or
         counts). Fewer keys: the pair that is complete is used and the error names the rest.
     angle_deg : float
-        The rig's tilt, degrees (the seed: 10).
+        The rig's tilt, degrees (the first published rig: 10).
     z_offset : float
         Offset of the vertical axis, which these tilts cannot measure (raw units).
 

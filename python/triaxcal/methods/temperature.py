@@ -10,7 +10,7 @@ with ``S`` the sensitivity (counts per unit: the inverse of the calibration matr
 
     calibrated = matrix(T) @ (raw - offset(T)),        matrix(T) = inv(S(T)).
 
-Degree 1 is the seeds' linear trend line (gyro-integration-calibration.txt:
+Degree 1 is the linear trend line of the turn-integration method (
 ``x = (raw - (tempcomp * dT + offset)) / gain``); degrees 2 and 3 are the autopilots' thermal
 calibration. All coefficients come from one linear least-squares solve per axis.
 
@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from .. import _options as opt
-from .._validate import as_samples
+from .._checks import options as opt
+from .._checks.arrays import as_samples
 from ..errors import CalibrationError
 
 __all__ = ["TemperatureModel", "TemperatureRangeWarning", "fit_temperature"]
@@ -165,7 +165,8 @@ def fit_temperature(
     degree : int
         1 (linear trend, default), 2 or 3.
     reference_degC : float, optional
-        ``T_ref``; default: the temperature of the first reading (the seed's "since start").
+        ``T_ref``; default: the temperature of the first reading (the turn-integration method's
+        "since start").
     truth : array_like (N, 3), optional
         True values of the readings in calibrated units; ``None``: the true value is zero
         (a gyro at rest), and only offsets are fitted.

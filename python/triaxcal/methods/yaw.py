@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points
+from .._checks.arrays import as_points
 from ..errors import CalibrationError
 
 __all__ = ["YawCalibration", "fit_yaw"]
@@ -79,6 +79,9 @@ class YawCalibration:
     n : int
     determined, assumed, limits : tuple of str
         What the data determine, what was assumed, and what the calibration cannot do.
+    heading_gap_deg : float
+        The widest arc of headings (deg) that no calibrated, levelled reading points into (the
+        validity gate refuses wide gaps: the turns then do not determine the ellipse).
     """
 
     offset: np.ndarray
@@ -97,6 +100,7 @@ class YawCalibration:
     determined: tuple[str, ...]
     assumed: tuple[str, ...]
     limits: tuple[str, ...]
+    heading_gap_deg: float = 0.0
 
     def apply(self, raw: Any) -> np.ndarray:
         """Calibrate raw readings: ``(raw - offset) @ matrix.T``."""
@@ -117,21 +121,8 @@ class YawCalibration:
             "determined": list(self.determined),
             "assumed": list(self.assumed),
             "limits": list(self.limits),
+            "heading_gap_deg": float(self.heading_gap_deg),
         }
-
-    def part(self, **kw: Any) -> Any:
-        """A :class:`~triaxcal.SensorCalibration` (model ``"yaw"``) with these numbers."""
-        from ..calibration import SensorCalibration
-
-        radius = (math.hypot(self.horizontal, self.vertical) if self.vertical is not None
-                  else self.horizontal)
-        stats = {"n": self.n, "model": "yaw", "rms": self.rms_horizontal_pct / 100 *
-                 self.horizontal, "rms_pct_of_radius": self.rms_horizontal_pct *
-                 self.horizontal / radius, "radius": radius, "yaw": self.stats(),
-                 "warnings": list(kw.pop("warnings", []))}
-        stats.update(kw.pop("extra_stats", {}) or {})
-        return SensorCalibration(offset=self.offset, matrix=self.matrix, raw_unit=self.raw_unit,
-                                 unit=self.unit, radius=radius, model="yaw", stats=stats, **kw)
 
     def text(self) -> str:
         """The limits in words, for the console and the report."""
@@ -283,7 +274,8 @@ def fit_yaw(
     Returns
     -------
     YawCalibration
-        ``.part()`` gives the :class:`~triaxcal.SensorCalibration` (model ``"yaw"``).
+        :func:`triaxcal.calibration.parts.part_from_yaw` gives the
+        :class:`~triaxcal.SensorCalibration` (model ``"yaw"``).
 
     Examples
     --------
@@ -400,7 +392,11 @@ def fit_yaw(
     if tilt.std() > 5:
         limits.append(f"the turn axis wandered by {tilt.std():.1f} deg (std): turns about the "
                       "vertical fit best on flat ground or calm water")
+    cal_l = (lp - o_l) @ m_l.T  # calibrated, levelled
+    headings = np.sort(np.degrees(np.arctan2(cal_l[:, 1], cal_l[:, 0])) % 360.0)
+    heading_gap = float(np.max(np.diff(np.concatenate([headings, [headings[0] + 360.0]]))))
     return YawCalibration(
+        heading_gap_deg=heading_gap,
         offset=_ro(offset), matrix=_ro(0.5 * (matrix + matrix.T)), unit=unit,
         raw_unit=raw_unit, horizontal=h, vertical=v, raw_horizontal=own_h,
         rms_horizontal_pct=rms_pct,

@@ -39,12 +39,13 @@ from ..io.protocol import CHANNELS_7, CHANNELS_10
 from .device import MODE_BYTES, Faults, SentFrame, SimDevice
 from .imu import Recording, SimIMU
 from .noise import NoiseTruth, noise_chunks, simulate_noise
-from .scripts import Script, globe_script, rotation_script, six_face_script
+from .scripts import Script, globe_script, rotation_script, six_face_script, tumble_script
 from .truth import (
     ACCEL_COUNTS_PER_G,
     GYRO_COUNTS_PER_DPS,
     GYRO_COUNTS_PER_RAD_S,
     MAG_COUNTS_PER_UT,
+    SIM_COUNTS_PER_UNIT,
     SensorTruth,
     Truth,
     matrix_to_rotvec,
@@ -62,6 +63,7 @@ __all__ = [
     "GYRO_COUNTS_PER_RAD_S",
     "MODE_BYTES",
     "MAG_COUNTS_PER_UT",
+    "SIM_COUNTS_PER_UNIT",
     "NoiseTruth",
     "Faults",
     "FreeLivingSim",
@@ -82,4 +84,5 @@ __all__ = [
     "six_face_script",
     "temp_c_from_raw",
     "temp_raw_from_c",
+    "tumble_script",
 ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import select
 import tempfile
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 #: each byte switches to.
 MODE_BYTES = {b"P": None, b"B": "binary", b"F": "framed", b"T": "text", b"R": "raw"}
 #: The identify command: the board answers ``ID:<serial number>\r\n`` (see
-#: :func:`triaxcal.io.multicapture.query_serial_number`).
+#: :func:`triaxcal.capture.multi.query_serial_number`).
 ID_BYTE = b"I"
 _MODE_OF = {None: "P", "binary": "B", "framed": "F", "text": "T", "raw": "R"}
 
@@ -74,6 +75,13 @@ class SentFrame:
     ``values`` the counts encoded; ``polled`` whether it answered a ``!`` request; ``intact``
     is False when its bytes were damaged (dropped or flipped), cut off by an unplug, or glued
     to garbage in front of it (so that a decoder cannot tell where the frame starts).
+
+    ``reply_s`` (polled replies only): an upper bound of the time the reply took, from the last
+    moment the device found its input empty before the request to the whole reply being in the
+    pty. A host that gave up on the request sooner (its poll timeout) may lose the reply or take
+    it for the answer to its next request. ``inf`` when the request came while an earlier reply
+    was still unsent (after a stall, e.g. on a loaded machine): the replies then reach the host
+    back to back, and it cannot tell them apart.
     """
 
     index: int
@@ -81,6 +89,7 @@ class SentFrame:
     values: tuple[int, ...]
     polled: bool
     intact: bool
+    reply_s: float | None = None
 
 
 class SimDevice:
@@ -93,7 +102,7 @@ class SimDevice:
     the current sample (in any mode); ``P`` stops streaming (the boot default), ``B``
     streams legacy binary frames, ``F`` framed (COBS + CRC-16) frames, ``T`` text lines, ``R``
     MotionCal ``Raw:`` lines; ``I`` answers the board's serial number as one line
-    ``ID:<serial>\r\n``; a 68-byte MotionCal calibration packet with a valid CRC is
+    ``ID:<serial>\\r\\n``; a 68-byte MotionCal calibration packet with a valid CRC is
     answered with ``Cal1:``/``Cal2:`` lines (stored in :attr:`motioncal`).
 
     Parameters
@@ -202,13 +211,16 @@ class SimDevice:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._lock = threading.Lock()
-        self._pending: list[list[Any]] = []  # [bytes, SentFrame, bytes written]
+        self._pending: list[list[Any]] = []  # [bytes, SentFrame, bytes written, since]
         self._pending_bytes = 0
         self._seq = 0
         self._next = 0  # next sample index to stream
         self._t0 = 0.0
         self._unplug_until = 0.0
         self._silent_until = 0.0
+        self._stall_until = 0.0
+        self._idle_at = 0.0  # last time the input was found empty with no reply unsent
+        self._reply_at = -1.0  # last time a polled reply was queued
         self._packet: bytearray | None = None
         self._packet_t = 0.0
         self._damage_next = False
@@ -267,6 +279,11 @@ class SimDevice:
         """Stop answering and streaming for ``seconds`` (real time); commands are ignored."""
         self._silent_until = time.monotonic() + float(seconds)
 
+    def stall(self, seconds: float) -> None:
+        """Stop reading the port for ``seconds`` (real time), as a busy board does: requests
+        wait in its input and are all answered afterwards (their ``reply_s`` says so)."""
+        self._stall_until = time.monotonic() + float(seconds)
+
     @property
     def sim_time_s(self) -> float:
         """Simulated seconds since :meth:`start`."""
@@ -303,8 +320,9 @@ class SimDevice:
         self._master = self._slave = None
         # whatever was half sent is lost; log it as damaged
         for item in self._pending:
-            if item[2]:
-                self.sent.append(replace(item[1], intact=False))
+            if item[2] and item[1] is not None:
+                self.sent.append(replace(item[1], intact=False,
+                                         reply_s=None if item[3] is None else math.inf))
         self._pending.clear()
         self._pending_bytes = 0
         self._packet = None
@@ -337,7 +355,14 @@ class SimDevice:
                 master = self._master
             assert master is not None
             try:
-                ready, _, _ = select.select([master], [], [], self._wait_s())
+                if time.monotonic() < self._stall_until:
+                    time.sleep(0.001)
+                    continue
+                ready, _, _ = select.select([master], [], [], 0)
+                if not ready:
+                    if not self._pending:
+                        self._idle_at = time.monotonic()
+                    ready, _, _ = select.select([master], [], [], self._wait_s())
                 if ready:
                     data = os.read(master, 4096)
                     if now >= self._silent_until and not self.wrong_baud:
@@ -395,7 +420,11 @@ class SimDevice:
         c = bytes([b])
         if c == b"!":
             cur = min(self._sample(), len(self._frames) - 1) if not self.loop else self._sample()
-            self._emit(cur, "binary", polled=True)
+            # the request came after the input was last seen empty; an earlier reply queued
+            # since then reaches the host back to back with this one
+            since = -1.0 if self._reply_at >= self._idle_at else self._idle_at
+            self._reply_at = time.monotonic()
+            self._emit(cur, "binary", polled=True, since=since)
         elif c == ID_BYTE and self.serial is not None:
             self._queue(f"ID:{self.serial}\r\n".encode("utf-8", "replace"), None)
         elif c in MODE_BYTES:
@@ -419,7 +448,7 @@ class SimDevice:
         row = self._frames9[i] if protocol == "raw" else self._frames[i]
         return tuple(int(v) for v in row)
 
-    def _emit(self, index: int, protocol: str, *, polled: bool) -> None:
+    def _emit(self, index: int, protocol: str, *, polled: bool, since: float = 0.0) -> None:
 
         values = self._values(index, protocol)
         if protocol == "binary":
@@ -434,7 +463,8 @@ class SimDevice:
         frame, junk, intact = self._damage(frame, protocol, polled)
         if junk:
             self._queue(junk, None)
-        self._queue(frame, SentFrame(index, protocol, values, polled, intact))
+        self._queue(frame, SentFrame(index, protocol, values, polled, intact),
+                    since if polled else None)
 
     def _damage(self, frame: bytes, protocol: str, polled: bool) -> tuple[bytes, bytes, bool]:
         f, rng = self.faults, self._frng
@@ -476,15 +506,17 @@ class SimDevice:
             self._damage_next = not polled and i == len(frame) - 1
         return bytes(data), junk, intact
 
-    def _queue(self, data: bytes, entry: SentFrame | None) -> None:
-        self._pending.append([data, entry, 0])
+    def _queue(self, data: bytes, entry: SentFrame | None, since: float | None = None) -> None:
+        """Send ``data`` (logged as ``entry``); ``since``: a polled reply's start (see
+        :attr:`SentFrame.reply_s`; negative: it follows an earlier reply back to back)."""
+        self._pending.append([data, entry, 0, since])
         self._pending_bytes += len(data)
 
     def _flush(self) -> None:
         master = self._master
         while self._pending and master is not None:
             item = self._pending[0]
-            data, entry, done = item
+            data, entry, done, since = item
             try:
                 n = os.write(master, data[done:])
             except BlockingIOError:
@@ -495,4 +527,7 @@ class SimDevice:
                 return
             self._pending.pop(0)
             if entry is not None:
+                if since is not None:  # a polled reply, now wholly in the pty
+                    entry = replace(entry, reply_s=math.inf if since < 0
+                                    else time.monotonic() - since)
                 self.sent.append(entry)

@@ -1,5 +1,5 @@
 """Scripted motions for the simulated IMU: hold still, turn, hold still (globe, six faces,
-rotations)."""
+rotations, a random tumble)."""
 
 from __future__ import annotations
 
@@ -175,7 +175,7 @@ def globe_script(
     jitter_deg: float = 2.0,
     seed: int = 0,
 ) -> Script:
-    """The seed's globe scheme: ``latitudes`` points on a meridian x ``turns`` twists = poses.
+    """The globe scheme: ``latitudes`` points on a meridian x ``turns`` twists = poses.
 
     The board sits flat on a globe at latitude ``phi`` (from +90 to -90 degrees, evenly
     spaced, poles included) on the meridian facing ``azimuth_deg`` (degrees from north towards
@@ -209,6 +209,26 @@ def globe_script(
     return Script.from_poses(
         np.array(poses), hold_s=hold_s, settle_s=settle_s, peak_dps=peak_dps, labels=labels
     )
+
+
+def tumble_script(n: int, *, seed: int = 0, hold_s: float = 0.5) -> Script:
+    """``n`` orientations drawn uniformly at random (unit quaternions), held ``hold_s`` each: a
+    board tumbled by hand through the whole sphere.
+
+    >>> s = tumble_script(30, seed=1)
+    >>> len(s), bool(abs(s.poses[:, :, 2].mean(axis=0)).max() < 0.4)  # body z all round
+    (30, True)
+    """
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise CalibrationError(f"tumble_script needs n >= 1 orientations, got {n!r}")
+    q = np.random.default_rng([seed, 7]).normal(size=(n, 4))
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    rot = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)
+    return Script.from_poses(rot, hold_s=hold_s, settle_s=0.0)
 
 
 def six_face_script(

@@ -19,6 +19,15 @@ GYRO_COUNTS_PER_RAD_S = GYRO_COUNTS_PER_DPS * 180.0 / math.pi
 MAG_COUNTS_PER_UT = 10.0
 INT16_MIN, INT16_MAX = -32768, 32767
 
+#: The simulated device's scale per sensor, in the form the exports take it
+#: (``export(..., counts_per_unit=SIM_COUNTS_PER_UNIT)``): the simulator's own, which no
+#: export assumes for any other device.
+SIM_COUNTS_PER_UNIT: dict[str, tuple[float, str]] = {
+    "accel": (ACCEL_COUNTS_PER_G, "g"),
+    "gyro": (GYRO_COUNTS_PER_DPS, "deg/s"),
+    "mag": (MAG_COUNTS_PER_UT, "uT"),
+}
+
 
 def temp_c_from_raw(raw: Any) -> np.ndarray:
     """Die temperature in degC from MPU-6050 style counts: ``raw / 340 + 36.53``."""

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
+from ..files import check_regular
 from ..recording import LogRecording
 
 __all__ = ["LOG_FORMATS", "LOG_SUFFIXES", "is_log", "log_format", "read_log", "require",
@@ -119,6 +120,8 @@ def read_log(
         )
     if fmt not in LOG_FORMATS:
         raise CalibrationError(f"unknown log format {fmt!r}: use one of {LOG_FORMATS}")
+    if not (fmt == "ros2-bag" and Path(path).is_dir()):
+        check_regular(path, what="log file")  # a pipe, device or socket is refused unread
     if fmt == "px4-ulog":
         from .ulog import read_ulog as reader
     elif fmt == "ardupilot-dataflash":

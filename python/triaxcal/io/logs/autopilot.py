@@ -50,6 +50,13 @@ from typing import Any
 
 import numpy as np
 
+from ...conventions.autopilot import (
+    PX4_COMP_TYPE,
+    PX4_SENSOR,
+    PX4_TC_ENABLE,
+    ardupilot_names,
+    px4_prefix,
+)
 from ...errors import CalibrationError
 
 __all__ = [
@@ -266,8 +273,6 @@ class AutopilotCalibration:
 # --------------------------------------------------------------------------------------------
 # PX4
 
-_PX4_NAMES = {"accel": "ACC", "gyro": "GYRO", "mag": "MAG"}
-_PX4_TC = {"accel": "TC_A_ENABLE", "gyro": "TC_G_ENABLE", "mag": "TC_M_ENABLE"}
 _PX4_UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "gauss"}
 _PX4_SOURCE = ("PX4-Autopilot src/lib/sensor_calibration/{cls}.hpp {cls}::Correct(); "
                "rotation: src/lib/conversion/rotation.h, Utilities.cpp GetSensorLevelAdjustment")
@@ -305,12 +310,12 @@ def px4_board_rotation(params: Mapping[str, Any]) -> np.ndarray:
 
 def px4_index(params: Mapping[str, Any], sensor: str, device_id: int | None) -> int | None:
     """The ``CAL_<S>n`` slot of ``device_id`` (``CAL_<S>_PRIME`` when None); None if absent."""
-    s = _PX4_NAMES[sensor]
+    s = PX4_SENSOR[sensor]
     if device_id is None:
         prime = params.get(f"CAL_{s}_PRIME")
         device_id = int(prime) if prime not in (None, 0) else None
     for n in range(4):
-        dev = params.get(f"CAL_{s}{n}_ID")
+        dev = params.get(f"{px4_prefix(sensor, n)}ID")
         if dev is None:
             continue
         if device_id is None:
@@ -318,15 +323,14 @@ def px4_index(params: Mapping[str, Any], sensor: str, device_id: int | None) -> 
                 return n
         elif int(dev) == int(device_id):
             return n
-    if device_id is None and f"CAL_{s}0_XOFF" in params:
+    if device_id is None and f"{px4_prefix(sensor, 0)}XOFF" in params:
         return 0
     return None
 
 
 def px4_part(params: Mapping[str, Any], sensor: str, index: int) -> AutopilotPart:
     """The PX4 calibration ``CAL_<S><index>_*`` of ``sensor`` as an :class:`AutopilotPart`."""
-    s = _PX4_NAMES[sensor]
-    p = f"CAL_{s}{index}_"
+    p = px4_prefix(sensor, index)
     if f"{p}XOFF" not in params:
         raise CalibrationError(f"the log's parameters have no {p}XOFF: no PX4 {sensor} "
                                f"calibration in slot {index}")
@@ -347,8 +351,8 @@ def px4_part(params: Mapping[str, Any], sensor: str, index: int) -> AutopilotPar
         for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
             m[i, j] = m[j, i] = od[k]
         comp = [get(f"{p}{a}COMP", 0.0) for a in "XYZ"]
-        if _num(params, "CAL_MAG_COMP_TYP", 0) != 0 and any(comp):
-            not_undoable = ("PX4 magnetometer power compensation (CAL_MAG_COMP_TYP, "
+        if _num(params, PX4_COMP_TYPE, 0) != 0 and any(comp):
+            not_undoable = (f"PX4 magnetometer power compensation ({PX4_COMP_TYPE}, "
                             f"{p}COMP) depends on throttle/current, which the log's sensor topics "
                             "do not carry: use the raw sensor_mag topic instead")
         rot = _num(params, f"{p}ROT", -1)
@@ -362,8 +366,8 @@ def px4_part(params: Mapping[str, Any], sensor: str, index: int) -> AutopilotPar
     for name in ("SENS_BOARD_ROT", "SENS_BOARD_X_OFF", "SENS_BOARD_Y_OFF", "SENS_BOARD_Z_OFF"):
         if name in params:
             used[name] = _num(params, name, 0.0)
-    if _num(params, _PX4_TC[sensor], 0) == 1 and not_undoable is None:
-        not_undoable = (f"{_PX4_TC[sensor]} = 1: PX4 also subtracted temperature-dependent "
+    if _num(params, PX4_TC_ENABLE[sensor], 0) == 1 and not_undoable is None:
+        not_undoable = (f"{PX4_TC_ENABLE[sensor]} = 1: PX4 also subtracted temperature-dependent "
                         "offsets (TC_* parameters) and the combined topics carry no "
                         "temperature; use the raw per-sensor topic (--instance N) instead")
     cls = {"accel": "Accelerometer", "gyro": "Gyroscope", "mag": "Magnetometer"}[sensor]
@@ -380,7 +384,7 @@ def px4_calibration(params: Mapping[str, Any],
     parts: dict[str, AutopilotPart] = {}
     for sensor in ("accel", "gyro", "mag"):
         idx = px4_index(params, sensor, (device_ids or {}).get(sensor))
-        if idx is not None and f"CAL_{_PX4_NAMES[sensor]}{idx}_XOFF" in params:
+        if idx is not None and f"{px4_prefix(sensor, idx)}XOFF" in params:
             parts[sensor] = px4_part(params, sensor, idx)
     return AutopilotCalibration(autopilot="px4", **parts)
 
@@ -389,23 +393,6 @@ def px4_calibration(params: Mapping[str, Any],
 # ArduPilot
 
 _AP_UNITS = {"accel": "m/s^2", "gyro": "rad/s", "mag": "mG"}
-
-
-def ardupilot_names(sensor: str, index: int) -> dict[str, str]:
-    """ArduPilot parameter prefixes of ``sensor`` number ``index`` (0-based, 0..2)."""
-    if not 0 <= index <= 2:
-        raise CalibrationError(f"ArduPilot {sensor} instance must be 0..2, got {index}")
-    n = "" if index == 0 else str(index + 1)
-    if sensor == "accel":
-        return {"offset": f"INS_ACC{n}OFFS_", "scale": f"INS_ACC{n}SCAL_",
-                "caltemp": f"INS_ACC{index + 1}_CALTEMP", "tcal": f"INS_TCAL{index + 1}_",
-                "coeff": "ACC"}
-    if sensor == "gyro":
-        return {"offset": "INS_GYROFFS_" if index == 0 else f"INS_GYR{n}OFFS_",
-                "caltemp": f"INS_GYR{index + 1}_CALTEMP", "tcal": f"INS_TCAL{index + 1}_",
-                "coeff": "GYR"}
-    return {"offset": f"COMPASS_OFS{n}_", "dia": f"COMPASS_DIA{n}_", "odi": f"COMPASS_ODI{n}_",
-            "scale": f"COMPASS_SCALE{n}"}
 
 
 def ardupilot_part(params: Mapping[str, Any], sensor: str, index: int = 0) -> AutopilotPart:

@@ -282,6 +282,7 @@ def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any 
         "mag_offsets_logged": mag_offsets,
         "mag_motor_offsets_logged": mag_motor,
         "damaged_headers_skipped": parsed.skipped,
+        "time_origin_us": t0,  # the log time (TimeUS) that is 0 s in every stream
     }
     return LogRecording(**streams, source=str(p), format="ardupilot-dataflash", params=params,
                         autopilot=cal if cal is not None and cal.sensors else None, meta=meta)

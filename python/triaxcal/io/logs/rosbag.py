@@ -12,6 +12,11 @@ calibrated.
 
 A ROS 2 bag is a folder with ``metadata.yaml``; pass the folder or a ``.db3``/``.mcap`` file
 in it (a lone ``.mcap`` file also works).
+
+Before ``rosbags`` sees a bag, :func:`~triaxcal.io.logs.bagcheck.check_bag` checks its magic
+bytes, that every record's lengths lie inside the file and that every compressed chunk unpacks
+to the size it declares (at most 256 MiB): ``rosbags`` would read a file of zeros named
+``.bag`` whole into memory, and unpack a chunk without bound.
 """
 
 from __future__ import annotations
@@ -22,8 +27,10 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError
+from ..files import check_regular, said
 from ..recording import LogRecording, Stream
 from . import require
+from .bagcheck import check_bag
 
 __all__ = ["read_rosbag"]
 
@@ -49,8 +56,7 @@ def _bag_path(p: Path) -> tuple[Path, str]:
         if not (p / "metadata.yaml").is_file():
             raise CalibrationError(f"{p} is a folder without metadata.yaml: not a ROS 2 bag")
         return p, "ros2-bag"
-    if not p.is_file():
-        raise CalibrationError(f"log file {p} not found")
+    check_regular(p, what="log file")
     suffix = p.suffix.lower()
     if suffix == ".bag":
         return p, "ros1-bag"
@@ -74,14 +80,15 @@ def _pick(conns: list[Any], types: tuple[str, ...], chosen: list[str], what: str
         if sel:
             return sel[0]
         if required:
-            have = ", ".join(sorted(c.topic for c in cands)) or "none"
+            have = said(", ".join(sorted(c.topic for c in cands)), 400) or "none"
             raise CalibrationError(f"{path}: none of {', '.join(chosen)} is a {what} topic "
                                    f"({what} topics: {have})")
         return None
     topics = sorted({c.topic for c in cands})
     if len(topics) > 1:
         raise CalibrationError(
-            f"{path} has several {what} topics ({', '.join(topics)}): choose one with --topic"
+            f"{path} has several {what} topics ({said(', '.join(topics), 400)}): choose one "
+            "with --topic"
         )
     return cands[0] if cands else None
 
@@ -100,6 +107,7 @@ def read_rosbag(path: str | Path, *, instance: int | None = None, topic: Any = N
         )
     p = Path(path)
     bag, fmt = _bag_path(p)
+    check_bag(bag, fmt)  # magic, lengths and chunk sizes, before rosbags sees it
     chosen = _topics(topic)
     try:
         reader = highlevel.AnyReader([bag])
@@ -108,7 +116,7 @@ def read_rosbag(path: str | Path, *, instance: int | None = None, topic: Any = N
         raise
     except Exception as exc:  # rosbags raises its own errors (and OSError) on damaged bags
         raise CalibrationError(
-            f"{p} is not a readable ROS bag ({type(exc).__name__}: {exc})"
+            f"{p} is not a readable ROS bag ({type(exc).__name__}: {said(exc)})"
         ) from None
     try:
         conns = list(reader.connections)
@@ -117,14 +125,14 @@ def read_rosbag(path: str | Path, *, instance: int | None = None, topic: Any = N
         temp = _pick(conns, _TEMP, chosen, "sensor_msgs/Temperature", p)
         known = {c.topic for c in (imu, mag, temp) if c is not None}
         unknown = [t for t in chosen if t not in known]
+        have = said(", ".join(sorted({f"{c.topic} ({c.msgtype})" for c in conns})), 400)
         if unknown:
-            have = ", ".join(sorted({f"{c.topic} ({c.msgtype})" for c in conns}))
             raise CalibrationError(f"{p}: no Imu, MagneticField or Temperature topic named "
                                    f"{', '.join(unknown)} (topics: {have})")
         if imu is None and mag is None:
-            have = ", ".join(sorted({f"{c.topic} ({c.msgtype})" for c in conns})) or "none"
             raise CalibrationError(
-                f"{p} has no sensor_msgs/Imu or sensor_msgs/MagneticField topic (it has: {have})"
+                f"{p} has no sensor_msgs/Imu or sensor_msgs/MagneticField topic (it has: "
+                f"{have or 'none'})"
             )
         sel = [c for c in (imu, mag, temp) if c is not None]
         buf: dict[str, list[tuple[float, float, float, float]]] = {c.topic: [] for c in sel}
@@ -144,7 +152,7 @@ def read_rosbag(path: str | Path, *, instance: int | None = None, topic: Any = N
         raise
     except Exception as exc:
         raise CalibrationError(
-            f"{p}: could not read the bag's messages ({type(exc).__name__}: {exc})"
+            f"{p}: could not read the bag's messages ({type(exc).__name__}: {said(exc)})"
         ) from None
     finally:
         reader.close()
@@ -164,14 +172,15 @@ def read_rosbag(path: str | Path, *, instance: int | None = None, topic: Any = N
         a = a[np.argsort(a[:, 0], kind="stable")]
         t = a[:, 0] - t0
         tc = None if ta is None else np.interp(t, ta[:, 0] - t0, ta[:, 1])
-        streams["accel"] = Stream(t=t, data=a[:, 1:4], unit="m/s^2", temp_c=tc, name=imu.topic)
-        streams["gyro"] = Stream(t=t, data=a[:, 4:7], unit="rad/s", temp_c=tc, name=imu.topic)
+        name = said(imu.topic)
+        streams["accel"] = Stream(t=t, data=a[:, 1:4], unit="m/s^2", temp_c=tc, name=name)
+        streams["gyro"] = Stream(t=t, data=a[:, 4:7], unit="rad/s", temp_c=tc, name=name)
     if mag is not None and len(arrays[mag.topic]):
         m = arrays[mag.topic]
         m = m[np.argsort(m[:, 0], kind="stable")]
         streams["mag"] = Stream(t=m[:, 0] - t0, data=m[:, 1:4] * 1e6, unit="uT",
-                                name=mag.topic)
+                                name=said(mag.topic))
     meta = {"topics": {k: v.name for k, v in streams.items()},
-            "temperature_topic": temp.topic if temp is not None else None,
-            "all_topics": sorted(f"{c.topic} ({c.msgtype})" for c in conns)}
+            "temperature_topic": said(temp.topic) if temp is not None else None,
+            "all_topics": sorted(said(f"{c.topic} ({c.msgtype})") for c in conns)}
     return LogRecording(**streams, source=str(p), format=fmt, meta=meta)

@@ -209,7 +209,8 @@ def read_ulog(path: str | Path, *, instance: int | None = None, topic: Any = Non
     }
     cal = _autopilot(params, device_ids, out, version, instance)
     meta.update({"instance": instance, "device_ids": device_ids,
-                 "topics": {k: v.name for k, v in out.items()}})
+                 "topics": {k: v.name for k, v in out.items()},
+                 "time_origin_us": t0})  # the log time (us) that is 0 s in every stream
     return LogRecording(**out, source=str(p), format="px4-ulog", params=params, autopilot=cal,
                         meta=meta)
 

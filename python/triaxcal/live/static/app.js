@@ -291,7 +291,7 @@ function unchanged(cv, key) {
 }
 
 function drawCoverage(cv, cov, dir) {
-  // the shared equal-area cells (triaxcal.coverage) in the cylindrical equal-area projection:
+  // the shared equal-area cells (triaxcal.quality.coverage) in the cylindrical equal-area projection:
   // longitude across (-180..180 deg, -X at both ends), height z up
   const dkey = dir ? dir.map((v) => (v / (norm(dir) || 1)).toFixed(2)).join() : "";
   if (unchanged(cv, cov.counts.join() + "|" + (cov.empty_cap ? cov.empty_cap.deg.toFixed(1) +
