@@ -38,6 +38,9 @@ _FIELDS = {
     "MAG": ("TimeUS", "MagX", "MagY", "MagZ", "OfsX", "OfsY", "OfsZ", "MOfsX", "MOfsY", "MOfsZ"),
 }
 
+# the fields a reading cannot do without
+_NEEDED = {"IMU": _FIELDS["IMU"][:7], "MAG": _FIELDS["MAG"][:4]}
+
 
 def _message_names(kind: str, instance: int) -> tuple[str, ...]:
     return (kind,) if instance == 0 else (kind, f"{kind}{instance + 1}")
@@ -57,10 +60,13 @@ class _Parsed:
     skipped: int
 
 
-def _time_us(values: Any) -> np.ndarray:
+def _time_us(values: Any, p: Path) -> np.ndarray:
     t = np.asarray(values)
     if t.dtype == np.uint64 and t.size and int(t.max()) > np.iinfo(np.int64).max:
-        raise CalibrationError("a TimeUS beyond 2^63 us: the log is damaged")
+        raise CalibrationError(
+            f"{p} has a TimeUS beyond 2^63 us (a damaged message): cut the log before the "
+            "damage or read another one"
+        )
     return t.astype(np.int64)
 
 
@@ -134,7 +140,7 @@ def _parse_core(p: Path, wanted: list[str], inst: int) -> _Parsed | None:
         seq = np.concatenate([q for q, _ in parts])
         order = np.argsort(seq, kind="stable")
         merged = {f: np.concatenate([c[f] for _, c in parts])[order] for f in parts[0][1]}
-        rows[base] = {f: _time_us(v) if f == "TimeUS" else v.astype(np.float64)
+        rows[base] = {f: _time_us(v, p) if f == "TimeUS" else v.astype(np.float64)
                       for f, v in merged.items()}
     return _Parsed(rows, params, changed, firmware, int(d["bad_headers"]))
 
@@ -238,6 +244,14 @@ def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any 
     parsed = (_parse_core(p, wanted, inst) if engine == "core" else None) or _parse_pymavlink(
         p, wanted, inst)
     imu, mag = parsed.rows["IMU"], parsed.rows["MAG"]
+    for base, got in (("IMU", imu), ("MAG", mag)):
+        missing = [f for f in _NEEDED[base] if got is not None and f not in got]
+        if missing:
+            raise CalibrationError(
+                f"{p}: the {base} messages have no field {', '.join(missing)} (their format "
+                "definition (FMT) is damaged or of a layout this reader does not know): read "
+                "another log, or choose another sensor with --instance N"
+            )
     if imu is None and mag is None:
         raise CalibrationError(
             f"{p} has no IMU or MAG messages for instance {inst} (is it a DataFlash .bin log "
