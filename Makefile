@@ -100,8 +100,9 @@ bench:
 bench-instructions:
 	$(PY) benches/instructions.py
 
-# The regression guard: a fit of 10 points, a fixed 1e5-point fit and a fixed batch may not grow by more than 10 %
-# over benches/instructions.json (update it with `benches/instructions.py --update`).
+# The regression guard: a fit of 10 points, a fixed 1e5-point fit, a fixed batch, the Allan deviation and the two
+# log readers may not grow by more than 10 % over benches/instructions.json (update it with
+# `benches/instructions.py --update`).
 instructions-guard:
 	$(PY) benches/instructions.py --check
 

@@ -10,6 +10,8 @@
 //! instructions descend N      descend_center (radius 16384, the seed's steps) of N points
 //! instructions allan N        overlapping Allan deviation of N rows x 3 axes, octave taus
 //! instructions adev N         non-overlapping Allan deviation of the same rows
+//! instructions ulog PATH      read a ULog, every topic decoded
+//! instructions dataflash PATH read a DataFlash log's MAG, ATT, BAT, IMU and PARM messages
 //! instructions none N         only generate the N points (subtract from the others)
 //! ```
 //!
@@ -89,9 +91,35 @@ fn allan_rows(n: usize) -> Vec<f64> {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: instructions {fit|batch|pass|polish|last|descend|allan|adev|none} N";
+    let usage = "usage: instructions {fit|batch|pass|polish|last|descend|allan|adev|none} N, \
+                 or instructions {ulog|dataflash} PATH";
     let what = args.get(1).expect(usage).as_str();
-    let n: usize = args.get(2).expect(usage).parse().expect(usage);
+    let arg = args.get(2).expect(usage);
+    match what {
+        "ulog" => {
+            let log = triaxcal::logs::ulog::read(std::path::Path::new(arg), None).unwrap();
+            let rows: usize = log
+                .datasets
+                .iter()
+                .map(|d| d.fields.first().map_or(0, |(_, c)| c.len()))
+                .sum();
+            println!("ulog: {} topics, {rows} messages", log.datasets.len());
+            return;
+        }
+        "dataflash" => {
+            let types = ["MAG", "ATT", "BAT", "IMU", "PARM"];
+            let out = triaxcal::logs::dataflash::read(std::path::Path::new(arg), &types).unwrap();
+            match out {
+                triaxcal::logs::dataflash::Outcome::Read { messages, .. } => {
+                    println!("dataflash: {} message types", messages.len())
+                }
+                _ => panic!("the DataFlash reader fell back on {arg}"),
+            }
+            return;
+        }
+        _ => {}
+    }
+    let n: usize = arg.parse().expect(usage);
     let opts = FitOptions {
         model: Model::Full,
         radius: Some(1.0),
