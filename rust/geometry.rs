@@ -126,6 +126,11 @@ pub fn scan_picking<const K: usize, F: Fn(&[f64; 3]) -> u32 + Sync>(
                 (scan_part(c, p0), l)
             })
             .collect();
+        // the lists at their final size at once (growing them by doubling would hold up to
+        // three times the points while copying)
+        for (k, list) in lists.iter_mut().enumerate() {
+            list.reserve_exact(parts.iter().map(|(_, l)| l[k].len()).sum());
+        }
         let mut total = ([0.0; 3], [0.0; 6], 0.0, 0.0);
         for (sums, l) in parts {
             total = add(total, sums);
