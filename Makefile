@@ -96,6 +96,10 @@ test: deps install data test-rust lint docs test-python firmware-check instructi
 bench:
 	$(PY) benches/bench_fit.py
 
+# Every speed target against its strongest baseline; rewrites docs/benchmarks/results.md.
+bench-speed:
+	$(PY) benches/bench_speed.py --markdown docs/benchmarks/results.md
+
 # Instruction counts with valgrind (callgrind): per point per pass, per fit, per batch set.
 bench-instructions:
 	$(PY) benches/instructions.py
