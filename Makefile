@@ -45,9 +45,10 @@ $(VENV)/bin/python:
 	       "(or apt-get install python3-venv) first, or give PY=/path/to/python" >&2; exit 1; }
 	$@ -m pip install -q --upgrade pip
 
-# The package in editable mode with its test extras (builds the Rust core in release mode).
+# The package in editable mode with its test extras (builds the Rust core in release mode, with
+# the benchmark hooks that benches/ and the instruction guard call; `make wheel` leaves them out).
 install: $(PY_DEP)
-	$(PY) -m pip install -q -e '.[test]'
+	MATURIN_PEP517_ARGS="--features bench-hooks" $(PY) -m pip install -q -e '.[test]'
 
 # The real recordings the tests read (tests/data/registry.txt): checked, and downloaded into the
 # cache when neither kept in tests/data nor in a local copy (TRIAXCAL_REALDATA, ../shared/realdata).
@@ -64,7 +65,7 @@ test-python:
 lint:
 	$(PY) -m ruff check python tests benches docs
 	$(PY) -m mypy python/triaxcal --ignore-missing-imports
-	$(PY) -m mypy.stubtest triaxcal._core
+	$(PY) -m mypy.stubtest triaxcal._core --allowlist .stubtest-allowlist --ignore-unused-allowlist
 
 # A wheel that installs without Rust: abi3 (CPython >= 3.9), manylinux2014 (glibc >= 2.17),
 # cross-linked with zig (the `ziglang` package from PyPI), plus the sdist, into dist/.

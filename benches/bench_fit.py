@@ -254,6 +254,9 @@ def row_overhead(rounds) -> None:
     no Python in between (``_core.time_fit``); the overhead is the difference, per round."""
     from triaxcal import _core
 
+    if not hasattr(_core, "time_fit"):
+        raise SystemExit("the call-overhead row needs the benchmark hooks: build with `make "
+                         "install` (cargo feature bench-hooks)")
     raw, _ = distorted_sphere(10, offset=TRUE_OFFSET, matrix=TRUE_MATRIX, noise=0.01, seed=4)
     calls = 2000
     per, core = [], []

@@ -133,12 +133,17 @@ gc.collect()
 gc.freeze()
 _core.repeat_call(lambda: tc.fit_ellipsoid(raw, radius=1.0), int(sys.argv[1]))
 """
-REPEAT = "triaxcal::py::fit::__pyfunction_repeat_call"
+REPEAT = "triaxcal::py::bench::__pyfunction_repeat_call"
 
 
 def python_call(calls: int = 1000) -> tuple[int, int]:
     """Instructions of one Python ``fit_ellipsoid`` call of 10 points, made from a lambda:
     (the whole call, the compiled fit inside it), averaged over ``calls`` calls."""
+    from triaxcal import _core
+
+    if not hasattr(_core, "repeat_call"):
+        raise SystemExit("the Python-call row needs the benchmark hooks: build with `make "
+                         "install` (cargo feature bench-hooks)")
     with tempfile.TemporaryDirectory() as tmp:
         script = Path(tmp) / "calls.py"
         script.write_text(CALL_SCRIPT)

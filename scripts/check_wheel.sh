@@ -21,6 +21,11 @@ fi
 python -m pip install -q --upgrade pip
 python -m pip install -q "$wheel"
 echo "installed $(basename "$wheel") into a venv with no Rust toolchain"
+# the benchmark hooks (cargo feature bench-hooks) are for the development build only
+if python -c "import sys, triaxcal._core as c; sys.exit(not (hasattr(c, 'time_fit') or hasattr(c, 'repeat_call')))"; then
+  echo "check_wheel: the wheel's core carries the benchmark hooks (built with bench-hooks)" >&2
+  exit 1
+fi
 
 case "$(uname -s)" in
   Linux)

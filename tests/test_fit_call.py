@@ -200,6 +200,12 @@ def test_fast_call_keeps_the_errors_of_bad_points():
         tc.fit_ellipsoid(np.zeros((10, 4)), radius=1.0)
 
 
+needs_hooks = pytest.mark.skipif(
+    not hasattr(_core, "repeat_call"),
+    reason="the benchmark hooks are built only by `make install` (cargo feature bench-hooks)")
+
+
+@needs_hooks
 def test_time_fit_times_the_compiled_fit_and_refuses_what_it_cannot_time():
     s = _core.time_fit(RAW[:10], 1.0, 50)
     assert 0 < s < 0.01
@@ -209,6 +215,7 @@ def test_time_fit_times_the_compiled_fit_and_refuses_what_it_cannot_time():
         _core.time_fit(RAW.astype(np.float32), 1.0, 1)
 
 
+@needs_hooks
 def test_repeat_call_calls_and_passes_errors_on():
     seen = []
     assert _core.repeat_call(lambda: seen.append(1), 3) is None

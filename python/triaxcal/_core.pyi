@@ -17,8 +17,6 @@ __all__ = [
     "grid_center",
     "fit_sphere_linear",
     "fit_ellipsoid",
-    "time_fit",
-    "repeat_call",
     "fit_batch",
     "apply",
     "AllanStream",
@@ -65,8 +63,6 @@ def fit_ellipsoid(
     fixed: list[float | None] | None,
     fixed_names: tuple[str, ...],
 ) -> Any: ...
-def time_fit(points: _Points, radius: float | None, repeats: int) -> float: ...
-def repeat_call(f: Any, times: int) -> None: ...
 def fit_batch(
     points: _Points,
     bounds: npt.NDArray[np.int64],

@@ -21,7 +21,7 @@ use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyString, PyTuple, PyType};
 /// Up to this many points a fit takes under about 0.3 ms (211 instructions a point): it keeps
 /// the GIL rather than releasing and re-taking it around the fit, and reads the points in place
 /// under it. Larger fits borrow them through numpy's borrow checker and release the GIL.
-const HOLD_GIL_UP_TO: usize = 1024;
+pub(super) const HOLD_GIL_UP_TO: usize = 1024;
 
 /// What the binding takes from the facade's module (`triaxcal.fit`, the module of the class it
 /// is given), once: `MAX_ITER`, `PARAM_NAMES` per model (sphere, axis, full) and
@@ -147,7 +147,7 @@ fn exact_options(
 }
 
 /// `points` as an exact, aligned, C-contiguous float64 (N, 3) ndarray, or `None`.
-fn ready_points<'a, 'py>(points: &'a Bound<'py, PyAny>) -> Option<&'a Bound<'py, PyArray2<f64>>> {
+pub(super) fn ready_points<'a, 'py>(points: &'a Bound<'py, PyAny>) -> Option<&'a Bound<'py, PyArray2<f64>>> {
     let arr = points.cast_exact::<PyArray2<f64>>().ok()?;
     (arr.shape()[1] == 3 && arr.is_c_contiguous() && arr.is_aligned()).then_some(arr)
 }
@@ -182,7 +182,7 @@ fn clear_writeable<D>(arr: &Bound<'_, PyArray<f64, D>>) {
 /// as it would with any numpy function reading it; rust-numpy's checker does not see such
 /// writers either.)
 #[allow(unsafe_code)]
-fn points_under_gil<'a>(_py: Python<'_>, arr: &'a Bound<'_, PyArray2<f64>>) -> &'a [[f64; 3]] {
+pub(super) fn points_under_gil<'a>(_py: Python<'_>, arr: &'a Bound<'_, PyArray2<f64>>) -> &'a [[f64; 3]] {
     // SAFETY: as above; `ready_points` checked that the array is C-contiguous and aligned, of
     // float64 and shape (N, 3).
     let flat = unsafe { arr.as_slice() }.expect("checked contiguous and aligned");
@@ -275,46 +275,4 @@ pub(super) fn fit_ellipsoid<'py>(
         py_result(py.detach(|| ellipsoid::fit_ellipsoid(pts, &opts)))?
     };
     fit_object(py, cls, facade, f, fixed_names).map(Some)
-}
-
-/// Benchmark aid (`benches/bench_fit.py`, the call-overhead row): seconds per fit of `points`
-/// with the facade's default options and `radius`, the fit run `repeats` times back to back in
-/// Rust (no Python in between), so that a Python call's time minus this is what the call adds.
-#[pyfunction]
-pub(super) fn time_fit(
-    py: Python<'_>,
-    points: &Bound<'_, PyAny>,
-    radius: Option<f64>,
-    repeats: usize,
-) -> PyResult<f64> {
-    let arr = ready_points(points)
-        .filter(|a| a.shape()[0] <= HOLD_GIL_UP_TO)
-        .ok_or_else(|| {
-            CalibrationError::new_err(format!(
-                "time_fit times small fits: an aligned, C-contiguous float64 (N, 3) array of \
-                 at most {HOLD_GIL_UP_TO} points"
-            ))
-        })?;
-    let opts = FitOptions {
-        radius,
-        ..FitOptions::default()
-    };
-    let pts = points_under_gil(py, arr);
-    let t0 = std::time::Instant::now();
-    for _ in 0..repeats.max(1) {
-        py_result(ellipsoid::fit_ellipsoid(std::hint::black_box(pts), &opts))?;
-    }
-    Ok(t0.elapsed().as_secs_f64() / repeats.max(1) as f64)
-}
-
-/// Benchmark aid (`benches/instructions.py`): calls `f()` `times` times. The instruction-count
-/// guard counts what runs inside this function (callgrind's `--toggle-collect`), so that
-/// starting Python and importing modules, which do not execute the same instructions from one
-/// run to the next, stay out of the count.
-#[pyfunction]
-pub(super) fn repeat_call(f: &Bound<'_, PyAny>, times: usize) -> PyResult<()> {
-    for _ in 0..times {
-        f.call0()?;
-    }
-    Ok(())
 }

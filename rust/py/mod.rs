@@ -4,6 +4,8 @@
 //! `fit_ellipsoid` (`fit.rs`): it checks plain arguments itself, keeps the GIL for small fits
 //! and builds the `EllipsoidFit`, for the sake of small calls.
 
+#[cfg(feature = "bench-hooks")]
+mod bench;
 mod allan;
 mod bounds;
 mod errors;
@@ -251,8 +253,11 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(grid_center, m)?)?;
     m.add_function(wrap_pyfunction!(fit_sphere_linear, m)?)?;
     m.add_function(wrap_pyfunction!(fit::fit_ellipsoid, m)?)?;
-    m.add_function(wrap_pyfunction!(fit::time_fit, m)?)?;
-    m.add_function(wrap_pyfunction!(fit::repeat_call, m)?)?;
+    #[cfg(feature = "bench-hooks")]
+    {
+        m.add_function(wrap_pyfunction!(bench::time_fit, m)?)?;
+        m.add_function(wrap_pyfunction!(bench::repeat_call, m)?)?;
+    }
     m.add_function(wrap_pyfunction!(fit_batch, m)?)?;
     m.add_function(wrap_pyfunction!(apply, m)?)?;
     m.add_class::<allan::AllanStream>()?;

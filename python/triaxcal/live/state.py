@@ -503,7 +503,11 @@ class LiveState:
 
         now = time.monotonic()
         cached = self._derived_cache.get(sensor)
-        if cached is not None and (cached[0] == key or now - cached[1] < 0.25):
+        # new points of the same fit wait up to 0.25 s; a new fit, or the session's final
+        # points, are judged at once (else the state could pair a fit with its predecessor's
+        # checks)
+        if cached is not None and (cached[0] == key or (
+                cached[0][1] == key[1] and key[0] != -2 and now - cached[1] < 0.25)):
             return cached[2]
         # directions: calibrated when there is a fit, else raw less a rough centre
         if len(raw):
