@@ -24,7 +24,7 @@ endif
 APT_PACKAGES := gcc python3-venv gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium \
                 chromium-driver valgrind gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
 
-.PHONY: deps install data test test-rust test-python lint stubs docs bench bench-instructions instructions-guard demo wheel wheel-check firmware-check
+.PHONY: deps install data test test-rust test-python lint stubs docs bench bench-speed bench-instructions instructions-guard demo wheel wheel-check firmware-check
 
 # Debian packages the tests need (a C compiler and venv for the build; the AVR firmware build,
 # its QEMU run, the Arduino sketch built against the Arduino AVR core; the firmware library's
