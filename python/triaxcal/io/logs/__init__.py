@@ -19,6 +19,7 @@ needed and missing a :class:`~triaxcal.CalibrationError` names the extra.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -122,6 +123,7 @@ def read_log(
         raise CalibrationError(f"unknown log format {fmt!r}: use one of {LOG_FORMATS}")
     if not (fmt == "ros2-bag" and Path(path).is_dir()):
         check_regular(path, what="log file")  # a pipe, device or socket is refused unread
+    reader: Callable[..., LogRecording]
     if fmt == "px4-ulog":
         from .ulog import read_ulog as reader
     elif fmt == "ardupilot-dataflash":
