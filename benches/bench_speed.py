@@ -23,10 +23,12 @@ Rows:
   normal-matrix pass on two cores (172 FLOP per point at 26.5 GFLOP/s per core);
 * the Allan deviation of 3 axes, octave taus: ``tc.allan`` against ``allantools.oadev`` per
   axis, and the core's non-overlapping accumulator against ``allantools.adev``;
-* the log readers: ``read_log`` of each real ULog against ``pyulog.ULog`` with the same topics,
-  and of each real DataFlash log against pymavlink's ``DFReader`` reading the same messages
-  (``recv_match`` over the types, the fields taken from each); accuracy: the arrays
-  triaxcal's reader returns against those of its pyulog / pymavlink path.
+* the log readers (the real logs of ``TRIAXCAL_REALDATA``, else ``../shared/realdata``):
+  triaxcal's reader of each real ULog (``read_ulog``, which ``read_log`` calls) against
+  ``pyulog.ULog`` with the same topics, and of each real DataFlash log against pymavlink's
+  ``DFReader`` reading the same messages (``recv_match`` over the types, the fields taken
+  from each); accuracy: the arrays triaxcal's reader returns against those of its pyulog /
+  pymavlink path.
 
 The table goes to ``--markdown`` (the docs include it from ``docs/benchmarks/results.md``).
 """
@@ -59,7 +61,9 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 from _synth import distorted_sphere  # noqa: E402
 from bench_fit import TRUE_MATRIX, TRUE_OFFSET, matrix_err, numpy_normal_equations, numpy_svd  # noqa: E402
 
-REALDATA = HERE.parent.parent / "shared" / "realdata"
+# the real recordings: TRIAXCAL_REALDATA, else ../shared/realdata beside the checkout (as the
+# tests find them)
+REALDATA = Path(os.environ.get("TRIAXCAL_REALDATA") or HERE.parent.parent / "shared" / "realdata")
 # FLOP limit of one normal-matrix pass: 172 FLOP per point, 26.5 GFLOP/s per core, 2 cores
 PASS_FLOP, CORE_FLOPS, CORES = 172, 26.5e9, 2
 
