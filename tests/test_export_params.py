@@ -409,7 +409,8 @@ def test_kalibr_models_and_validation():
     doc = yaml.safe_load(kalibr_imu_yaml(cal, rate_hz=100, model="calibrated"))
     assert doc["model"] == "calibrated" and "accelerometers" not in doc
     assert "accelerometer_noise_density" not in doc
-    for kw, match in (({"topic": "imu; rm -rf"}, "ROS topic"), ({"rate_hz": 0}, "> 0"),
+    for kw, match in (({"topic": "imu; rm -rf"}, "ROS topic"),
+                      ({"rate_hz": 0}, r"rate_hz must be a finite number in \[0.001"),
                       ({"noise": {"accelerometer_noise_density": 1.0}}, "missing"),
                       ({"noise": {**dict.fromkeys(
                           ("accelerometer_noise_density", "accelerometer_random_walk",

@@ -521,8 +521,10 @@ def test_yaml_float_round_trips():
         assert isinstance(back, float) and back == v, (v, t)
     with pytest.raises(tc.CalibrationError):
         yaml_float(float("inf"))
-    text = kalibr_imu_yaml(None, rate_hz=1e-05, model="calibrated")
+    text = kalibr_imu_yaml(None, rate_hz=0.001, model="calibrated")
     assert isinstance(yaml.safe_load(text)["update_rate"], float)
+    with pytest.raises(tc.CalibrationError, match="rate_hz must be a finite number in"):
+        kalibr_imu_yaml(None, rate_hz=1e-05, model="calibrated")  # one sample in 28 hours
 
 
 # ------------------------------------------------------------------------ C headers
@@ -537,11 +539,12 @@ def _compile(header, tmp_path, fixed=False):
 
 
 def test_float_header_refuses_coefficients_beyond_float(tmp_path):
-    """Before: `inff` in the header, which does not compile."""
+    """Before: `inff` in the header, which does not compile. Such coefficients (past 1e15 in
+    any unit) are now refused when the part is made, before any header."""
     for kw in ({"matrix": np.eye(3) * 1e39}, {"offset": [1e40, 0, 0]}, {"radius": 5e38}):
-        part = tc.SensorCalibration(**{"offset": [1, 2, 3], "matrix": np.eye(3),
-                                       "raw_unit": "counts", "unit": "counts", **kw})
-        with pytest.raises(tc.CalibrationError, match="beyond what a C float holds"):
+        with pytest.raises(tc.CalibrationError, match=r"larger than 1e\+15|must lie in"):
+            part = tc.SensorCalibration(**{"offset": [1, 2, 3], "matrix": np.eye(3),
+                                           "raw_unit": "counts", "unit": "counts", **kw})
             tc.c_header(tc.Calibration(accel=part), force=True)
 
 

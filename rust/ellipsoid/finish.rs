@@ -212,8 +212,11 @@ pub(super) fn finish<const P: usize>(
             let w1t = theta_of::<9>(o, &w1);
             th1[3..P].copy_from_slice(&w1t[3..P]);
             let c = kernel::pass::<P>(sample, &setup(norm, &th1), want, opts.parallel);
+            // scaled to all points: the scatter sums and the count alike (the spread is their
+            // ratio; scaling the count alone divided it by n / sample.len() and reported
+            // evenly spread readings as a band of the sphere)
             let up = n as f64 / sample.len() as f64;
-            fin.sums.dd = c.dd;
+            fin.sums.dd = c.dd.map(|d| d * up);
             fin.sums.faces = c.faces.map(|f| (f * up).round());
             fin.sums.count = c.count * up;
         }

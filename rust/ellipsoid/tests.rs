@@ -61,6 +61,14 @@ fn large_input_takes_the_subsample_path() {
     )
     .unwrap();
     assert!(f.converged && f.rms < 1e-9, "{f:?}");
+    // readings spread evenly over the sphere: no coverage warning, whatever the size of the
+    // subsample the coverage is measured on (it once read as "only a band of the sphere")
+    assert!(f.warnings.is_empty(), "{:?}", f.warnings);
+    for n in [60_001, 250_000] {
+        let pts = ellipsoid_points([0.1, 0.2, -0.3], w, 9.80665, n);
+        let f = fit_ellipsoid(&pts, &FitOptions::default()).unwrap();
+        assert!(f.warnings.is_empty(), "{n}: {:?}", f.warnings);
+    }
 }
 
 #[test]

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationError, NonFiniteError
+from .options import MAGNITUDE, named
 
 
 def as_points(points: Any, name: str = "points", min_rows: int = 0) -> np.ndarray:
@@ -34,12 +35,19 @@ def as_samples(
     """Return ``samples`` as a C-contiguous float64 (N, K) array, one row per reading.
 
     ``channels="xyz"`` requires exactly 3 columns; ``"xyz+"`` at least 3 (x, y, z first, more
-    channels after). With ``finite``, a NaN or inf raises :class:`NonFiniteError` naming the
-    first bad row. Every failure is a :class:`CalibrationError` saying what to pass instead.
+    channels after); ``"any"`` one or more (a 1-D array is one channel). With ``finite``, a NaN
+    or inf raises :class:`NonFiniteError` naming the first bad row, and a reading larger in size
+    than :data:`~triaxcal._checks.options.MAGNITUDE` allows (1e15: past any unit a sensor reads
+    in, and where the squares and fourth powers the methods form would leave a double's range)
+    is refused naming it. Every failure is a :class:`CalibrationError` saying what to pass
+    instead.
     """
+    name = named(name)
     exact = channels == "xyz"
+    least = 1 if channels == "any" else 3
     want = "(N, 3), one row of x, y, z per reading" if exact else (
-        "(N, K) with K >= 3 channels (x, y, z first)"
+        "(N, K) with K >= 3 channels (x, y, z first)" if least == 3 else
+        "(N,) or (N, K), one row per reading"
     )
     try:
         arr = np.asarray(samples)
@@ -52,7 +60,9 @@ def as_samples(
             f"{name} must hold real numbers (integer or float), got dtype {arr.dtype}; "
             "convert text columns with np.asarray(x, dtype=float) first"
         )
-    if arr.ndim != 2 or (arr.shape[1] != 3 if exact else arr.shape[1] < 3):
+    if least == 1 and arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or (arr.shape[1] != 3 if exact else arr.shape[1] < least):
         raise CalibrationError(f"{name} must have shape {want}; got shape {arr.shape}")
     if arr.shape[0] < min_rows:
         raise CalibrationError(f"{name} needs at least {min_rows} rows, got {arr.shape[0]}")
@@ -64,14 +74,78 @@ def as_samples(
     if finite and not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
         raise NonFiniteError(
-            f"{name} contains NaN or inf (first at row {bad}); drop or repair those rows first"
+            f"{name} contains NaN or inf (first at row {bad}): readings must be finite; drop or "
+            "repair those rows first"
         )
+    if finite and arr.size:
+        big = np.abs(arr).max(axis=1) > MAGNITUDE[1]
+        if big.any():
+            bad = int(np.flatnonzero(big)[0])
+            raise CalibrationError(
+                f"{name} holds a reading of size {float(np.abs(arr[bad]).max()):.3g} (row {bad}), "
+                f"beyond {MAGNITUDE[1]:g} in any unit a sensor reads in: give the readings in "
+                "their own unit (counts, g, m/s^2, deg/s, uT)"
+            )
     return arr
+
+
+def lengths(rows: np.ndarray) -> np.ndarray:
+    """The Euclidean length of each row, without overflow or underflow for any finite rows
+    (each row is scaled by a power of two first, which is exact); a length beyond the largest
+    double is inf.
+
+    >>> lengths(np.array([[3e300, 4e300, 0.0], [3.0, 4.0, 0.0]])).tolist()
+    [5e+300, 5.0]
+    """
+    big = np.abs(rows).max(axis=1) if rows.size else np.zeros(len(rows))
+    _, e = np.frexp(big)
+    with np.errstate(over="ignore"):
+        return np.linalg.norm(np.ldexp(rows, -e[:, None]), axis=1) * np.ldexp(1.0, e)
+
+
+def as_matrix3(value: Any, name: str) -> np.ndarray:
+    """A finite 3x3 matrix (nested lists or an array) as float64, its entries within
+    :data:`~triaxcal._checks.options.MAGNITUDE` in size."""
+    name = named(name)
+    try:
+        arr = np.asarray(value) if not isinstance(value, (str, bytes, dict)) else None
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.dtype.kind not in "iuf" or arr.shape != (3, 3):
+        raise CalibrationError(f"{name} must be a 3x3 matrix of real numbers, got "
+                               f"{_shown(value)}")
+    out = arr.astype(np.float64)
+    if not (np.isfinite(out).all() and np.abs(out).max() <= MAGNITUDE[1]):
+        raise CalibrationError(f"{name} must hold finite numbers no larger than "
+                               f"{MAGNITUDE[1]:g}, got {out.tolist()}")
+    return out
+
+
+def finite_result(values: dict[str, Any], what: str, why: str) -> None:
+    """Refuse a result whose named values are not all finite: ``what`` (the method) could not
+    compute them from these data, ``why`` says what to do."""
+    bad = [k for k, v in values.items()
+           if not np.isfinite(np.asarray(v, dtype=np.float64)).all()]
+    if bad:
+        raise CalibrationError(f"{what}: {', '.join(bad)} came out infinite or undefined: "
+                               f"{why}")
+
+
+def _shown(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def as_vector(value: Any, name: str) -> tuple[float, float, float]:
     """Return a finite 3-vector (a scalar is repeated on all three axes)."""
-    arr = np.asarray(value, dtype=np.float64)
+    name = named(name)
+    try:
+        arr = np.asarray(value) if not isinstance(value, (str, bytes, dict)) else None
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.dtype.kind not in "iuf":
+        raise CalibrationError(f"{name} must be a number or 3 numbers, got {_shown(value)}")
+    arr = arr.astype(np.float64)
     if arr.ndim == 0:
         arr = np.repeat(arr, 3)
     if arr.shape != (3,):

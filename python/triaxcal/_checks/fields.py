@@ -25,6 +25,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import CalibrationError
+from .options import MAGNITUDE
 
 #: Largest calibration file read, in bytes: 16 MiB. A calibration file is a few kB (a
 #: million-point fit's statistics are summaries, not the points); reading and checking every
@@ -344,6 +345,10 @@ def check_matrix(m: np.ndarray, what: str) -> None:
             f"{what}: the diagonal (diag) is all zero, so the matrix would not scale any axis "
             "by itself; the file is damaged or hand-made wrongly"
         )
+    if float(np.abs(m).max()) > MAGNITUDE[1]:
+        raise CalibrationError(
+            f"{what} holds {float(np.abs(m).max()):.3g}, larger than {MAGNITUDE[1]:g} in any "
+            "unit: the file is damaged or hand-made wrongly")
     s = np.linalg.svd(m, compute_uv=False)
     if not s[-1] > s[0] * 1e-12:
         raise CalibrationError(

@@ -25,23 +25,67 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Sequence
+import os
+import re
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from ..errors import CalibrationError
+from .spelling import opt
 
 __all__ = [
+    "MAGNITUDE",
+    "MAX_SAMPLES",
+    "MAX_SEED",
     "choice",
     "flag",
+    "instance",
     "integer",
     "intervals",
+    "magnitude",
+    "mapping",
+    "named",
     "number",
     "numbers_list",
     "optional_number",
+    "path",
+    "samples",
+    "seed",
+    "text_stream",
     "vector3",
 ]
+
+#: The magnitudes a reading or a scale-like option (gravity, a radius, a field, an angle, a
+#: gain) may have, in whatever unit: 1e-15 to 1e15. Every unit a sensor reads in lies well
+#: inside (raw counts of a 32-bit converter stay below 5e9, a field in nT below 1e5, gravity
+#: in ug below 1e7), and the squares, products and fourth powers the methods form of such
+#: numbers (at most 1e60, at least 1e-60) stay far inside a double's range (1e-308 to 1e308):
+#: a value near the edge of a double (1e308, 1e-308) is refused by name instead of
+#: overflowing in the middle of a computation.
+MAGNITUDE = (1e-15, 1e15)
+
+#: Most samples a duration may stand for (2**53: a double counts them exactly), far beyond any
+#: recording; a longer duration is refused by name instead of overflowing a count.
+MAX_SAMPLES = 2**53
+
+#: Largest seed of a random generator (numpy takes any whole number >= 0; 2**64 - 1 is what a
+#: 64-bit register stores).
+MAX_SEED = 2**64 - 1
+
+_IDENTIFIER = re.compile(r"[a-z][a-z0-9_]*\Z")
+
+
+def named(name: str) -> str:
+    """The option ``name`` as the user wrote it (:func:`~triaxcal._checks.spelling.opt`: a
+    flag on the command line, the Python name otherwise); a name that is not a plain
+    identifier (``intervals[0] start``, ``accel_threshold_g (g)``) is kept as it is.
+
+    >>> named("rate_hz"), named("intervals[0] start")
+    ('rate_hz', 'intervals[0] start')
+    """
+    return opt(name) if _IDENTIFIER.match(name) else name
 
 
 def _fmt(x: float) -> str:
@@ -87,6 +131,7 @@ def number(
     ``gt``/``ge`` and ``lt``/``le`` are the open/closed bounds; ``finite`` refuses NaN and inf
     (NaN is always refused). ``hint`` is appended to the message (e.g. a typical value).
     """
+    name = named(name)
     rng = _range_text(gt, ge, lt, le)
     what = ("a finite number" if finite else "a number") + (f" {rng}" if rng else "")
     tail = f" ({hint})" if hint else ""
@@ -121,6 +166,7 @@ def integer(
 
     A float with an integral value (``3.0``) is accepted; ``2.5``, ``"3"``, ``True`` are not.
     """
+    name = named(name)
     rng = _range_text(None, ge, None, le)
     what = "a whole number" + (f" {rng}" if rng else "")
     tail = f" ({hint})" if hint else ""
@@ -143,14 +189,14 @@ def choice(value: Any, name: str, options: Sequence[str]) -> str:
     """Return ``value`` if it is one of the strings ``options``; else raise naming them."""
     if not isinstance(value, str) or value not in options:
         listed = ", ".join(repr(o) for o in options)
-        raise CalibrationError(f"{name} must be one of {listed}, got {_shown(value)}")
+        raise CalibrationError(f"{named(name)} must be one of {listed}, got {_shown(value)}")
     return value
 
 
 def flag(value: Any, name: str) -> bool:
     """Return ``value`` if it is a bool (``True``/``False``); ``"no"`` or ``0`` are refused."""
     if not isinstance(value, (bool, np.bool_)):
-        raise CalibrationError(f"{name} must be True or False, got {_shown(value)}")
+        raise CalibrationError(f"{named(name)} must be True or False, got {_shown(value)}")
     return bool(value)
 
 
@@ -162,6 +208,7 @@ def numbers_list(
     **bounds: Any,
 ) -> tuple[float, ...]:
     """A sequence (list, tuple, 1-D array) of at least ``min_len`` numbers, each in range."""
+    name = named(name)
     if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
         raise CalibrationError(
             f"{name} must be a sequence of numbers (at least {min_len}), got {_shown(value)}"
@@ -177,8 +224,13 @@ def numbers_list(
 
 def vector3(value: Any, name: str, *, hint: str = "") -> np.ndarray:
     """Three finite real numbers (a list, tuple or array of shape (3,)) as a float64 array."""
+    name = named(name)
     tail = f" ({hint})" if hint else ""
-    arr = np.asarray(value) if not isinstance(value, (str, bytes)) else np.asarray([value])
+    try:
+        arr = np.asarray(value) if not isinstance(value, (str, bytes, Mapping)) else (
+            np.asarray([value], dtype=object))
+    except (TypeError, ValueError):  # ragged
+        arr = np.zeros(0, dtype=object)
     if arr.dtype.kind not in "iuf" or arr.shape != (3,):
         raise CalibrationError(
             f"{name} must be 3 finite real numbers (x, y, z), got {_shown(value)}{tail}"
@@ -224,3 +276,93 @@ def intervals(value: Any, name: str, n: int) -> list[tuple[int, int]]:
                 f"{name}: intervals ({a0}, {b0}) and ({a1}, {b1}) overlap; give each sample once"
             )
     return out
+
+
+def magnitude(value: Any, name: str, *, hint: str = "", signed: bool = False) -> float:
+    """A scale-like number (gravity, a radius, a field, an angle) within :data:`MAGNITUDE`:
+    positive, or (``signed``) zero or of either sign with its size within it.
+
+    >>> magnitude(9.81, "gravity")
+    9.81
+    >>> magnitude(1e-308, "gravity")
+    Traceback (most recent call last):
+    ...
+    triaxcal.CalibrationError: gravity must be a finite number in [1e-15, 1e+15], got 1e-308
+    """
+    lo, hi = MAGNITUDE
+    if not signed:
+        return number(value, name, ge=lo, le=hi, hint=hint)
+    x = number(value, name, ge=-hi, le=hi, hint=hint)
+    if x != 0 and abs(x) < lo:
+        raise CalibrationError(f"{named(name)} must be 0 or at least {lo:g} in size, got "
+                               f"{_shown(value)}" + (f" ({hint})" if hint else ""))
+    return x
+
+
+def samples(seconds: float, rate_hz: float, name: str) -> int:
+    """The whole number of samples (rounded) that ``seconds`` last at ``rate_hz``: both already
+    checked numbers; a duration of more samples than :data:`MAX_SAMPLES` is refused naming
+    the option, instead of overflowing the count.
+
+    >>> samples(2.0, 100.0, "rest_s")
+    200
+    >>> samples(1e308, 100.0, "rest_s")
+    Traceback (most recent call last):
+    ...
+    triaxcal.CalibrationError: rest_s=1e+308 s at 100 Hz is more samples than any recording \
+holds: give a duration within the recording
+    """
+    n = float(seconds) * float(rate_hz)
+    if not (math.isfinite(n) and abs(n) <= MAX_SAMPLES):
+        raise CalibrationError(
+            f"{named(name)}={float(seconds):g} s at {float(rate_hz):g} Hz is more samples than "
+            "any recording holds: give a duration within the recording")
+    return int(round(n))
+
+
+def seed(value: Any, name: str = "seed") -> int:
+    """A seed of a random generator: a whole number from 0 to :data:`MAX_SEED`.
+
+    >>> seed(7)
+    7
+    >>> seed(-1)
+    Traceback (most recent call last):
+    ...
+    triaxcal.CalibrationError: seed must be a whole number in [0, 18446744073709551615], got -1
+    """
+    return integer(value, name, ge=0, le=MAX_SEED)
+
+
+def instance(value: Any, types: type | tuple[type, ...], name: str, what: str) -> Any:
+    """``value`` if it is an instance of ``types``; else a refusal saying ``what`` to pass
+    (``"a Calibration (from Calibration.load or fit_session)"``)."""
+    if not isinstance(value, types):
+        raise CalibrationError(f"{named(name)} must be {what}, got {_shown(value)}")
+    return value
+
+
+def mapping(value: Any, name: str, *, optional: bool = True) -> dict[str, Any] | None:
+    """A mapping with string keys (a copy as a dict), or None when ``optional``."""
+    if value is None and optional:
+        return None
+    if not isinstance(value, Mapping) or not all(isinstance(k, str) for k in value):
+        raise CalibrationError(
+            f"{named(name)} must be a mapping of names to values (a dict), got {_shown(value)}")
+    return dict(value)
+
+
+def path(value: Any, name: str) -> str | os.PathLike[str]:
+    """A file or folder name: a non-empty ``str`` or :class:`os.PathLike`."""
+    if not isinstance(value, (str, os.PathLike)) or not os.fspath(value):
+        raise CalibrationError(
+            f"{named(name)} must be a file name (str or pathlib.Path), got {_shown(value)}")
+    return value
+
+
+def text_stream(value: Any, name: str) -> Any:
+    """A text stream (anything with a ``write`` method, like ``sys.stderr``), or None."""
+    if value is not None and not callable(getattr(value, "write", None)):
+        raise CalibrationError(
+            f"{named(name)} must be a text stream such as sys.stderr (or None), got "
+            f"{_shown(value)}")
+    return value

@@ -19,11 +19,22 @@ __all__ = ["Alignment"]
 
 
 #: The ``alignment`` object of a calibration part (values checked by :class:`Alignment`).
+#: The alignment statistics the report prints as numbers (the others are kept as plain JSON).
+_ALIGNMENT_STATS: dict[str, _schema.Field] = {
+    **{k: _schema.Field(_schema.real) for k in (
+        "dip_deg", "dip_std_before_deg", "dip_std_after_deg", "rms_deg", "angle_deg",
+        "mounting_residual_deg")},
+    **{k: _schema.Field(_schema.optional(_schema.real)) for k in (
+        "dip_std_heldout_before_deg", "dip_std_heldout_after_deg", "heading_rms_est_deg")},
+    **{k: _schema.Field(_schema.integer) for k in ("n_poses", "n_fit", "n_heldout")},
+}
+
 _ALIGNMENT_FIELDS: dict[str, _schema.Field] = {
     "to": _schema.Field(_schema.text(16, nonblank=True), required=True),
     "rotation": _schema.Field(lambda v, w: _schema.reals(v, (3, 3), w), required=True),
     "mounting": _schema.Field(_schema.optional(_schema.text(64, nonblank=True))),
-    "stats": _schema.Field(_schema.optional(_schema.json_object)),
+    "stats": _schema.Field(_schema.optional(lambda v, w: _schema.check_fields(
+        v, _ALIGNMENT_STATS, w, open_ended=True))),
 }
 
 
@@ -52,7 +63,10 @@ class Alignment:
 
     def __post_init__(self) -> None:
         r = _schema.reals(self.rotation, (3, 3), "alignment.rotation")
-        if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) <= 0:
+        # (the entries of a rotation lie within +-1: larger ones are refused before r @ r.T,
+        # which they could overflow)
+        if (np.abs(r).max() > 1 + 1e-6 or np.abs(r @ r.T - np.eye(3)).max() > 1e-6
+                or np.linalg.det(r) <= 0):
             raise CalibrationError(
                 "alignment.rotation must be a proper rotation (orthonormal rows, determinant "
                 f"+1), got {r.tolist()}; a mirrored axis is a sign error in the readings")

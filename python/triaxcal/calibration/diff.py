@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from ..conventions.names import CELL, COEFFICIENTS
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
@@ -302,15 +303,16 @@ def compare(
     >>> d.verdict, d.exit_code, round(d.parts[0].coefficients[0].sigmas, 3)
     ('same', 0, 0.354)
     """
-    if not (isinstance(threshold, (int, float)) and threshold > 0 and math.isfinite(threshold)):
-        raise CalibrationError(f"threshold must be a number of standard errors > 0, got "
-                               f"{threshold!r}")
-    for name, v in (("max_gain_change", max_gain_change),
-                    ("max_offset_change", max_offset_change)):
-        if not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
-            raise CalibrationError(f"{name} must be a fraction > 0, got {v!r}")
-    kw = {"threshold": float(threshold), "max_gain_change": float(max_gain_change),
-          "max_offset_change": float(max_offset_change)}
+    kw = {"threshold": options.number(threshold, "threshold", gt=0,
+                                      hint="standard errors"),
+          "max_gain_change": options.number(max_gain_change, "max_gain_change", gt=0,
+                                            hint="a fraction"),
+          "max_offset_change": options.number(max_offset_change, "max_offset_change", gt=0,
+                                              hint="a fraction of the radius")}
+    if sensors is not None and (isinstance(sensors, (str, bytes)) or not isinstance(
+            sensors, (tuple, list)) or not all(isinstance(x, str) for x in sensors)):
+        raise CalibrationError(f"sensors must be a tuple of sensor names (accel, gyro, mag) or "
+                               f"None, got {sensors!r:.60}")
     notes: list[str] = []
     if isinstance(old, SensorCalibration) and isinstance(new, SensorCalibration):
         parts: tuple[PartDiff, ...] = (

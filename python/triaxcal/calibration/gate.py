@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.arrays import as_points
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError, RefusedError
 from ..quality import bounds as B
@@ -308,6 +309,8 @@ def check_part(part: SensorCalibration, sensor: str, *, points: Any = None) -> V
     """
     if not isinstance(part, SensorCalibration):
         raise CalibrationError(f"the gate judges a SensorCalibration, got {type(part).__name__}")
+    if points is not None:
+        points = as_points(points, "points")
     s = part.stats
     why: list[str] = []
     if s.get("converged") is False:

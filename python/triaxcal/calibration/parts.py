@@ -42,6 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
+from .._checks.arrays import as_matrix3
 from .._checks.spelling import opt
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
@@ -64,10 +66,29 @@ __all__ = [
 
 
 def _finite3(v: Any, what: str) -> np.ndarray:
-    a = np.asarray(v, dtype=np.float64).reshape(-1)
-    if a.shape != (3,) or not np.isfinite(a).all():
-        raise CalibrationError(f"{what} must be 3 finite numbers, got {v!r}")
-    return a
+    return options.vector3(v, what)
+
+
+def _result(value: Any, what: str, *names: str) -> Any:
+    """A method's result (``what``: "a TiltRig (from tilt_rig)") that has the attributes
+    ``names``; anything else is refused saying what to pass."""
+    missing = [n for n in names if not hasattr(value, n)]
+    if missing:
+        raise CalibrationError(f"expected {what}, got {type(value).__name__} (it has no "
+                               f"{', '.join(missing)})")
+    return value
+
+
+def _common(stats: Any, force: Any) -> dict[str, Any]:
+    """The options every ``part_from_*`` takes: ``stats`` (a mapping) and ``force``."""
+    options.flag(force, "force")
+    return options.mapping(stats, "stats") or {}
+
+
+def _base(base: Any) -> SensorCalibration | None:
+    return None if base is None else options.instance(
+        base, SensorCalibration, "base", "a SensorCalibration (the part already in the file) "
+        "or None")
 
 
 def part_from_center(
@@ -111,10 +132,9 @@ def part_from_center(
     >>> part.apply([[120.0, -80.0, 300.0 + 16384.0]]).tolist()
     [[0.0, 0.0, 1.0]]
     """
+    stats = _common(stats, force)
     c = _finite3(center, "center")
-    r = float(radius)
-    if not (math.isfinite(r) and r > 0):
-        raise CalibrationError(f"radius must be > 0 in raw units, got {radius!r}")
+    r = options.magnitude(radius, "radius", hint="raw units")
     if scale_to is None:
         matrix = np.eye(3)
         out_unit = raw_unit if unit is None else unit
@@ -125,9 +145,7 @@ def part_from_center(
             )
         model = "offset"
     else:
-        s = float(scale_to)
-        if not (math.isfinite(s) and s > 0):
-            raise CalibrationError(f"scale_to must be > 0, got {scale_to!r}")
+        s = options.magnitude(scale_to, "scale_to", hint="what the radius is in unit")
         if unit is None:
             raise CalibrationError("scale_to needs the unit it is in (unit='g', 'uT'...)")
         matrix = np.eye(3) * (s / r)
@@ -137,7 +155,7 @@ def part_from_center(
     if stats:
         st.update(stats)
     return gated(SensorCalibration(offset=c, matrix=matrix, raw_unit=raw_unit, unit=out_unit,
-                                   radius=None if scale_to is None else float(scale_to),
+                                   radius=None if scale_to is None else s,
                                    model=model, stats=st, source=source,
                                    input_sha256=input_sha256), force=force)
 
@@ -167,6 +185,9 @@ def part_from_tilt_rig(
     >>> part.apply([[0.01, 0.0, 1.0]]).round(6).tolist() == [[0.0, 0.0, 1.0]]
     True
     """
+    stats = _common(stats, force)
+    _result(rig, "a TiltRig (from tilt_rig)", "gain", "offset", "angle_deg",
+            "implied_angle_deg", "gain_z_pairs")
     gain = _finite3(rig.gain, "gain")
     st: dict[str, Any] = {
         "method": "tilt-rig",
@@ -221,7 +242,15 @@ def part_from_gyro_gains(
     >>> part.apply([[50.0 + 164.0, -20.0, 5.0 + 160.0]]).round(9).tolist(), part.stats["gain_from"]
     ([[10.0, 0.0, 10.0]], ['nominal', 'nominal', 'turns'])
     """
-    gain = np.asarray(gains.gain_counts_per_dps, dtype=np.float64).reshape(-1)
+    stats = _common(stats, force)
+    base = _base(base)
+    _result(gains, "a GyroGains (from gyro_gains)", "gain_counts_per_dps", "offset",
+            "angle_deg", "gain_cw_counts_per_dps", "gain_ccw_counts_per_dps", "asymmetry",
+            "rotations", "missing")
+    try:
+        gain = np.asarray(gains.gain_counts_per_dps, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError, OverflowError):
+        gain = np.zeros(0)
     if gain.shape != (3,) or np.isinf(gain).any() or not np.isfinite(gain).any():
         raise CalibrationError(f"gain_counts_per_dps must hold 3 gains (NaN for an axis not "
                                f"turned, at least one finite), got {gain.tolist()}")
@@ -234,10 +263,8 @@ def part_from_gyro_gains(
               and UNITS.get(base.unit, ("",))[0] == "gyro")
     nominal = None
     if nominal_counts_per_dps is not None:
-        nominal = float(nominal_counts_per_dps)
-        if not (math.isfinite(nominal) and nominal > 0):
-            raise CalibrationError(f"{opt('nominal_counts_per_dps')} must be a gain > 0 "
-                                   f"(counts per deg/s), got {nominal_counts_per_dps!r}")
+        nominal = options.magnitude(nominal_counts_per_dps, "nominal_counts_per_dps",
+                                    hint="counts per deg/s")
     for i in np.flatnonzero(~measured):
         if usable:
             assert base is not None
@@ -309,6 +336,10 @@ def part_from_temperature(
     >>> bool(np.allclose(part.apply([[80.0, -30.0, 10.0]], temperature=35.0), 0))
     True
     """
+    stats = _common(stats, force)
+    base = _base(base)
+    _result(model, "a TemperatureModel (from fit_temperature)", "degree", "rms", "n",
+            "offset_coef", "reference_degC", "t_min_degC", "t_max_degC")
     if getattr(model, "gain", "none") != "none" and base is not None:
         raise CalibrationError(
             "a temperature model with fitted gains replaces the part's matrix: write it "
@@ -344,10 +375,9 @@ def _triad_parts(accel: Any, gyro: Any, g_sensitivity: Any, *, method: str, grav
                  stats: Mapping[str, Any] | None, source: str | None,
                  input_sha256: str | None, force: bool) -> dict[str, SensorCalibration]:
     """The accelerometer and gyroscope parts of a two-triad method, both through the gate."""
-    g = float(gravity)
-    if not (math.isfinite(g) and g > 0):
-        raise CalibrationError(f"gravity must be > 0 (in {unit}), got {gravity!r}")
-    if UNITS.get(unit, ("",))[0] != "accel":
+    stats = _common(stats, force)
+    g = options.magnitude(gravity, "gravity", hint=f"local gravity in {unit}")
+    if not isinstance(unit, str) or UNITS.get(unit, ("",))[0] != "accel":
         raise CalibrationError(f"the accelerometer's unit must be one of acceleration (g, "
                                f"m/s^2), got {unit!r}")
     k_ga = np.asarray(g_sensitivity, dtype=np.float64)
@@ -358,11 +388,11 @@ def _triad_parts(accel: Any, gyro: Any, g_sensitivity: Any, *, method: str, grav
             "g_sensitivity_unit": f"{gyro_raw_unit} per {unit} (not applied by the part)"}
     parts = {
         "accel": SensorCalibration(offset=_finite3(accel.offset, "accel offset"),
-                                   matrix=np.asarray(accel.matrix, dtype=np.float64),
+                                   matrix=as_matrix3(accel.matrix, "accel matrix"),
                                    raw_unit=accel_raw_unit, unit=unit, radius=g, model=method,
                                    stats=a_st, source=source, input_sha256=input_sha256),
         "gyro": SensorCalibration(offset=_finite3(gyro.offset, "gyro offset"),
-                                  matrix=np.asarray(gyro.matrix, dtype=np.float64),
+                                  matrix=as_matrix3(gyro.matrix, "gyro matrix"),
                                   raw_unit=gyro_raw_unit, unit="rad/s", model=method,
                                   stats=g_st, source=source, input_sha256=input_sha256),
     }
@@ -423,6 +453,8 @@ def part_from_ferraris(
     >>> np.degrees(parts["gyro"].apply([[16.4, 0, 0]])).round(9).tolist()
     [[1.0, 0.0, 0.0]]
     """
+    _result(fer, "a FerrarisCalibration (from ferraris)", "accel", "gyro", "g_sensitivity",
+            "accel_counts_per_g", "gyro_counts_per_dps", "rotation_sign")
     return _triad_parts(
         fer.accel, fer.gyro, fer.g_sensitivity, method="ferraris", gravity=gravity, unit=unit,
         accel_raw_unit=accel_raw_unit, gyro_raw_unit=gyro_raw_unit,
@@ -448,12 +480,16 @@ def part_from_imu(
     (Tedaldi's multi-position method); the arguments and result as for
     :func:`part_from_ferraris`. The stats record the still poses, the threshold the sweep
     chose, the accelerometer's residual and the gyro fit's gravity-direction residual."""
+    _result(imu, "an ImuCalibration (from calibrate_imu)", "accel", "gyro",
+            "gyro_g_sensitivity", "accel_model", "intervals", "k", "accel_rms", "n_moves",
+            "gyro_rms_deg", "gyro_rms_deg_before", "gyro_iterations")
+    g = options.magnitude(gravity, "gravity", hint=f"local gravity in {unit}")
     return _triad_parts(
-        imu.accel, imu.gyro, imu.gyro_g_sensitivity, method="imu", gravity=gravity, unit=unit,
+        imu.accel, imu.gyro, imu.gyro_g_sensitivity, method="imu", gravity=g, unit=unit,
         accel_raw_unit=accel_raw_unit, gyro_raw_unit=gyro_raw_unit,
         accel_stats={"accel_model": imu.accel_model, "n_poses": len(imu.intervals),
                      "k": float(imu.k), "rms": float(imu.accel_rms),
-                     "rms_pct_of_radius": 100.0 * float(imu.accel_rms) / float(gravity)},
+                     "rms_pct_of_radius": 100.0 * float(imu.accel_rms) / g},
         gyro_stats={"n_moves": int(imu.n_moves), "gyro_rms_deg": float(imu.gyro_rms_deg),
                     "gyro_rms_deg_before": float(imu.gyro_rms_deg_before),
                     "iterations": int(imu.gyro_iterations)},
@@ -485,12 +521,13 @@ def part_from_turntable(
     >>> part_from_turntable(fit, raw_unit="rad/s").apply([[1.01, 0, 0]]).round(9).tolist()
     [[1.01, 0.0, 0.0]]
     """
-    if UNITS.get(unit, ("",))[0] != "gyro":
+    stats = _common(stats, force)
+    _result(fit, "a TurntableFit (from fit_turntable)", "offset", "matrix", "rates",
+            "measured", "rel_error", "n_plateaus", "rms_rel")
+    if not isinstance(unit, str) or UNITS.get(unit, ("",))[0] != "gyro":
         raise CalibrationError(f"the turntable's rates must be in a rate unit (rad/s, deg/s), "
                                f"got {unit!r}")
-    k = float(scale)
-    if not (math.isfinite(k) and k > 0):
-        raise CalibrationError(f"scale must be > 0 ({unit} per unit of the rates), got {scale!r}")
+    k = options.magnitude(scale, "scale", hint=f"{unit} per unit of the rates")
     st: dict[str, Any] = {
         "method": "turntable",
         "rates": [float(v) * k for v in fit.rates],
@@ -502,7 +539,7 @@ def part_from_turntable(
     if stats:
         st.update(stats)
     return gated(SensorCalibration(offset=_finite3(fit.offset, "offset"),
-                                   matrix=np.asarray(fit.matrix, dtype=np.float64) * k,
+                                   matrix=as_matrix3(fit.matrix, "matrix") * k,
                                    raw_unit=raw_unit, unit=unit, model="turntable", stats=st,
                                    source=source, input_sha256=input_sha256), "gyro",
                  force=force)
@@ -519,6 +556,9 @@ def part_from_yaw(y: Any, *, force: bool = False, **kw: Any) -> SensorCalibratio
 def yaw_part_unjudged(y: Any, **kw: Any) -> SensorCalibration:
     """:func:`part_from_yaw` before the gate (for a caller that judges it itself, as
     :func:`triaxcal.calibration.session.fit_to_file` does)."""
+    from ..methods.yaw import YawCalibration
+
+    options.instance(y, YawCalibration, "y", "a YawCalibration (from fit_yaw)")
     radius = (math.hypot(y.horizontal, y.vertical) if y.vertical is not None
               else y.horizontal)
     stats = {"n": y.n, "model": "yaw", "rms": y.rms_horizontal_pct / 100 *
@@ -554,6 +594,7 @@ def fold_asa(part: SensorCalibration, asa: Any) -> SensorCalibration:
     """
     from ..io.akm import asa_factors
 
+    options.instance(part, SensorCalibration, "part", "a SensorCalibration")
     k = asa_factors(asa)
     if part.stats.get("asa") is not None:
         raise CalibrationError("this part already holds an ASA adjustment")

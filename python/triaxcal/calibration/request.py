@@ -36,11 +36,13 @@ from dataclasses import dataclass, replace
 from dataclasses import field as _field
 from typing import Any
 
+from .._checks import options
 from .._checks.spelling import opt
 from ..conventions.names import SENSORS
 from ..detect.session import PoseSettings
 from ..errors import CalibrationError
 from ..fit.ellipsoid import MODELS
+from ..methods.bootstrap import MAX_BOOTSTRAP
 
 __all__ = [
     "FIT_METHODS",
@@ -53,9 +55,6 @@ __all__ = [
     "parse_radius",
 ]
 
-#: Most bootstrap refits a request may ask for (each is a full fit; 10,000 resamples give
-#: 95 % intervals to well under a percent of their width).
-MAX_BOOTSTRAP = 10_000
 
 #: How a session is fitted: ``"ellipsoid"`` (the readings alone) or ``"attitude"`` (a flight
 #: log's compass against the Earth's field turned by the logged attitude,
@@ -336,19 +335,16 @@ class FitRequest:
                 if isinstance(r, bool) or not isinstance(r, (int, float)):
                     raise CalibrationError(f"{opt('radius')} must be a number or text such as "
                                            f"1g, got {r!r}")
-                r = repr(float(r))
+                r = repr(options.magnitude(r, "radius"))
             if r.strip().lower() != "wmm":
                 parse_radius(r, self.sensor)  # raises with what to pass
             object.__setattr__(self, "radius", r)
         for name in ("unit", "raw_unit"):
             v = getattr(self, name)
             if v is not None:
-                _text(v, f"{name} (--{name.replace('_', '-')})", 32)
-        s = self.sigma
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or not (float(s) >= 0):
-            raise CalibrationError(f"{opt('sigma')} must be a number >= 0 (0: no rejection), "
-                                   f"got {s!r}")
-        object.__setattr__(self, "sigma", float(s))
+                _text(v, opt(name), 32)
+        object.__setattr__(self, "sigma", options.number(
+            self.sigma, "sigma", ge=0, finite=False, hint="standard deviations; 0: no rejection"))
         _whole(self.rounds, f"{opt('rounds')}", 0, MAX_ROUNDS)
         if self.outliers not in OUTLIER_RULES:
             raise CalibrationError(f"{opt('outliers')} must be one of "

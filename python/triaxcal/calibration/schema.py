@@ -45,8 +45,10 @@ from .._checks.fields import (  # noqa: F401  (re-exported: the file's validator
     sha256_hex,
     text,
 )
+from .._checks.options import MAGNITUDE
 from ..conventions.names import SENSORS  # noqa: F401
 from ..errors import CalibrationError
+from ..quality.bounds import DIE_TEMPERATURE_C
 
 #: Model names a part may carry. Fits give ``sphere``, ``axis``, ``full``; the methods give
 #: the others. A new method adds its name here.
@@ -138,7 +140,37 @@ STATS_FIELDS: dict[str, Field] = {
     "interference": Field(lambda v, w: _interference(v, w)),
     "undetermined": Field(list_of(text(MAX_TEXT, plain=False), max_items=64)),
     "record_instead": Field(optional(text(MAX_TEXT, plain=False))),
+    "intervals": Field(lambda v, w: _intervals(v, w)),
 }
+
+
+def _interval(value: Any, what: str) -> dict[str, Any]:
+    return check_fields(value, {k: Field(real, required=k != "boot_std") for k in (
+        "estimate", "stderr", "boot_std", "lower", "upper", "tolerance")}, what,
+        open_ended=True)
+
+
+def _intervals(value: Any, what: str) -> dict[str, Any]:
+    """Bootstrap intervals (``BootstrapIntervals.as_dict``): the numbers the report and
+    ``diff`` print and compare are numbers."""
+    v = check_fields(value, {
+        "level": Field(real, required=True),
+        "n_boot": Field(integer, required=True),
+        "n_failed": Field(integer),
+        "resample": Field(text(64), required=True),
+        "raw_radius": Field(optional(real)),
+        "coefficients": Field(lambda c, w: _coefficients(c, w), required=True),
+        "flagged": Field(list_of(text(64))),
+        "warnings": Field(list_of(text(MAX_TEXT, plain=False))),
+    }, what, open_ended=True)
+    return v
+
+
+def _coefficients(value: Any, what: str) -> dict[str, Any]:
+    if not isinstance(value, Mapping):
+        raise CalibrationError(f"{what} must be an object of coefficient name -> interval")
+    return {text(64)(k, f"a key of {what}"): _interval(c, f"{what}.{k}")
+            for k, c in value.items()}
 
 
 def _interference(value: Any, what: str) -> dict[str, Any]:
@@ -166,8 +198,33 @@ def stats_object(value: Any, what: str) -> dict[str, Any]:
 
 def _temp_c(value: Any, what: str) -> float:
     v = real(value, what)
-    if v < -273.15:
+    lo, hi = DIE_TEMPERATURE_C
+    if v < lo:
         raise CalibrationError(f"{what} is {v} degC, below absolute zero")
+    if v > hi:
+        raise CalibrationError(f"{what} is {v:g} degC, hotter than any sensor's die ({hi:g} "
+                               "degC): the file is damaged or the temperature is in another unit")
+    return v
+
+
+def _bounded(arr: np.ndarray, what: str) -> np.ndarray:
+    """Coefficients no larger than :data:`~triaxcal._checks.options.MAGNITUDE` in size: past
+    any unit a sensor reads in, and where applying them (squares, products, powers of dT)
+    would leave a double's range."""
+    hi = MAGNITUDE[1]
+    if arr.size and float(np.abs(arr).max()) > hi:
+        raise CalibrationError(f"{what} holds {float(np.abs(arr).max()):.3g}, larger than "
+                               f"{hi:g} in any unit: the file is damaged")
+    return arr
+
+
+def scale(value: Any, what: str) -> float:
+    """A radius or a field strength: positive and within MAGNITUDE."""
+    v = positive(value, what)
+    lo, hi = MAGNITUDE
+    if not lo <= v <= hi:
+        raise CalibrationError(f"{what} must lie in [{lo:g}, {hi:g}] in any unit, got {v:g}: "
+                               "the file is damaged")
     return v
 
 
@@ -181,7 +238,7 @@ def temp_range(value: Any, what: str) -> tuple[float, float]:
 
 def poly(value: Any, what: str) -> np.ndarray:
     """Temperature polynomial coefficients: (degree + 1, 3), degree 0..MAX_POLY_DEGREE."""
-    arr = reals(value, (-1, 3), what)
+    arr = _bounded(reals(value, (-1, 3), what), what)
     if not 1 <= arr.shape[0] <= MAX_POLY_DEGREE + 1:
         raise CalibrationError(
             f"{what} has {arr.shape[0]} rows (degree {arr.shape[0] - 1}); it must have 1 to "
@@ -192,7 +249,7 @@ def poly(value: Any, what: str) -> np.ndarray:
 
 
 def vec3(value: Any, what: str) -> np.ndarray:
-    return reals(value, (3,), what)
+    return _bounded(reals(value, (3,), what), what)
 
 
 TEMPERATURE_FIELDS: dict[str, Field] = {
@@ -213,7 +270,7 @@ PART_FIELDS: dict[str, Field] = {
     "diag": Field(vec3, required=True),
     "offdiag": Field(vec3, required=True),
     "offdiag_lower": Field(optional(vec3)),
-    "radius": Field(optional(positive)),
+    "radius": Field(optional(scale)),
     "model": Field(optional(model_name)),
     "temperature": Field(optional(lambda v, w: check_fields(v, TEMPERATURE_FIELDS, w))),
     "input_sha256": Field(optional(sha256_hex)),
@@ -249,7 +306,7 @@ SUMMARY_FIELDS: dict[str, Field] = {
     "diag": Field(_vec3_list, required=True),
     "offdiag": Field(_vec3_list, required=True),
     "offdiag_lower": Field(optional(_vec3_list)),
-    "radius": Field(optional(positive)),
+    "radius": Field(optional(scale)),
     "model": Field(optional(model_name)),
     "stderr": Field(_stderr),
     "rms": Field(nonnegative),

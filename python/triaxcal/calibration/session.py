@@ -7,11 +7,13 @@ refuse a fit which is not a calibration (:func:`undetermined`). ``triaxcal fit``
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
 from ..io.akm import apply_asa
@@ -78,7 +80,13 @@ def fit_session(
     """
     from ..fit.select import fit_robust
 
-    req = request if request is not None else FitRequest()
+    req = options.instance(request if request is not None else FitRequest(), FitRequest,
+                           "request", "a FitRequest (or None)")
+    if not isinstance(data, (Table, str, os.PathLike)):
+        raise CalibrationError(f"data must be a file name or a Table (from read_table), got "
+                               f"{type(data).__name__}")
+    if accel is not None:
+        options.instance(accel, SensorCalibration, "accel", "a SensorCalibration or None")
     sensor = req.sensor
     notes: list[str] = []
     if req.method == "attitude":
@@ -87,14 +95,14 @@ def fit_session(
         if isinstance(data, Table):
             raise CalibrationError("--method attitude needs a flight log (.bin, .ulg) with the "
                                    "vehicle's attitude, not a table")
-        part, fsrc = fit_flight(data, req)
+        part, fsrc = fit_flight(os.fspath(data), req)
         return FitOutcome(part=part, points=fsrc.raw, sensor=sensor,
                           rejected=np.asarray(part.stats.get("rejected", []), dtype=np.int64),
                           reason=None, table=None, source=None, notes=notes,
                           expected=part.expected_field, flight=fsrc)
     expected = expected_for(req)
     src = table_source(data, sensor, req.source) if isinstance(data, Table) else load_source(
-        data, sensor, req.source)
+        os.fspath(data), sensor, req.source)
     table, pts = src.table, src.points
     if table is not None:
         notes += [f"note: {n}" for n in table.notes]
@@ -201,6 +209,12 @@ def fit_to_file(
     had for this sensor is kept in the new part's ``previous``. The accelerometer part already
     in ``output`` gives the vertical of a yaw-only fit and the frame of ``field.align``.
     """
+    options.instance(request, FitRequest, "request", "a FitRequest")
+    options.path(output, "output")
+    options.flag(new, "new")
+    options.flag(force, "force")
+    if sensor_id is not None and not isinstance(sensor_id, str):
+        raise CalibrationError(f"sensor_id must be text or None, got {sensor_id!r:.60}")
     before = existing_calibration(output, new=new)
     accel = before.accel if before is not None else None
     out = fit_session(data, request, accel=accel)

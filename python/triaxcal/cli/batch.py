@@ -64,7 +64,8 @@ def register(subparsers: Any) -> None:
                    help="limits from a JSON object {name: value}; --limit overrides it")
     p.add_argument("--prefix", default="triaxcal", help="C prefix of the headers")
     p.add_argument("--jobs", type=int, default=None,
-                   help="worker processes (default: one per CPU)")
+                   help="worker processes (default: one per CPU; at most 1024, and never more "
+                        "than there are boards)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

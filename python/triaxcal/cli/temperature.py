@@ -105,7 +105,13 @@ def _temperature(table: Any, args: argparse.Namespace) -> tuple[np.ndarray, str]
         offset = args.temp_offset
     if not math.isfinite(offset):
         raise CalibrationError(f"--temp-offset must be finite, got {offset}")
-    t = table.data[:, names.index(col)] * scale + offset
+    with np.errstate(over="ignore", invalid="ignore"):
+        t = table.data[:, names.index(col)] * scale + offset
+    if not np.isfinite(t[np.isfinite(table.data[:, names.index(col)])]).all():
+        raise CalibrationError(
+            f"--temp-scale {scale:g} and --temp-offset {offset:g} turn {col} into temperatures "
+            "beyond any number: give the column's scale in deg C per raw unit (1/340 for an "
+            "MPU-6050)")
     how = (f"{col} (deg C = raw / {1 / scale:.6g} + {offset:g})" if scale != 1.0 or offset
            else f"{col} (deg C)")
     return t, how

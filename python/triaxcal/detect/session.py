@@ -22,10 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
+from .._checks.arrays import as_samples
 from .._checks.spelling import opt
 from ..errors import CalibrationError
+from ..quality.bounds import sample_rate
 from ._segmenter import PoseDetection
-from .poses import PoseDetector, detect_poses
+from .poses import PoseDetector, _columns, detect_poses
 
 #: Last column of a session whose rows are the board's pose means (``capture --board-poses``):
 #: the samples each mean averages.
@@ -87,12 +90,7 @@ class ResolvedPoses:
 def _positive(value: Any, what: str, allow_none: bool = True) -> float | None:
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise CalibrationError(f"{what} must be a number, got {value!r}")
-    v = float(value)
-    if not (math.isfinite(v) and v > 0):
-        raise CalibrationError(f"{what} must be a finite number > 0, got {v}")
-    return v
+    return options.magnitude(value, what)
 
 
 @dataclass(frozen=True)
@@ -144,25 +142,22 @@ class PoseSettings:
     def __post_init__(self) -> None:
         if isinstance(self.window, bool) or not isinstance(self.window, (int, np.integer)) or \
                 self.window < 1:
-            raise CalibrationError(f"window must be a whole number of samples >= 1, got "
-                                   f"{self.window!r}")
-        _positive(self.accel_threshold_g, "accel_threshold_g (g)", allow_none=False)
+            raise CalibrationError(f"{opt('window')} must be a whole number of samples >= 1, "
+                                   f"got {self.window!r}")
+        _positive(self.accel_threshold_g, "accel_threshold_g", allow_none=False)
         _positive(self.counts_per_g, "counts_per_g")
-        _positive(self.gyro_threshold, "gyro_threshold (gyro counts)")
-        _positive(self.mag_threshold, "mag_threshold (magnetometer counts)")
-        _positive(self.rate_hz, "rate_hz")
+        _positive(self.gyro_threshold, "gyro_threshold")
+        _positive(self.mag_threshold, "mag_threshold")
+        if self.rate_hz is not None:
+            sample_rate(self.rate_hz)
         hw = self.hold_windows
         if hw is not None and (isinstance(hw, bool) or not isinstance(hw, (int, np.integer))
                                or hw < 2):
-            raise CalibrationError(f"hold_windows must be a whole number >= 2 (or None), got "
-                                   f"{hw!r}")
-        h = self.holdoff_s
-        if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) or \
-                not (math.isfinite(float(h)) and float(h) >= 0):
-            raise CalibrationError(f"holdoff_s must be a number of seconds >= 0, got {h!r}")
+            raise CalibrationError(f"{opt('hold_windows')} must be a whole number >= 2 (or "
+                                   f"None), got {hw!r}")
+        options.number(self.holdoff_s, "holdoff_s", ge=0, hint="seconds")
         for name in ("use_gyro", "use_mag"):
-            if not isinstance(getattr(self, name), bool):
-                raise CalibrationError(f"{name} must be True or False")
+            options.flag(getattr(self, name), name)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON values (stored with a calibration made from poses)."""
@@ -207,7 +202,7 @@ class PoseSettings:
         rows = rows[:HEAD_ROWS]
         cols = sensor_columns(names)
         if accel is not None:
-            cols["accel"] = tuple(int(c) for c in accel)  # type: ignore[assignment]
+            cols["accel"] = _columns(accel, "accel", None)
         if "accel" not in cols:
             raise CalibrationError(
                 "pose detection needs the accelerometer: name its columns ax, ay, az (as "
@@ -244,7 +239,7 @@ class PoseSettings:
                         "the session has no usable t column)"
                     )
                 rate = (len(times) - 1) / float(times[-1] - times[0])
-            holdoff = int(round(self.holdoff_s * rate))
+            holdoff = options.samples(self.holdoff_s, rate, "holdoff_s")
         kwargs: dict[str, Any] = {
             "window": int(self.window),
             "threshold": self.accel_threshold_g * cpg,
@@ -303,10 +298,13 @@ def session_poses(
     >>> len(det.poses), how.sensors
     (84, ('accel', 'gyro', 'mag'))
     """
-    s = settings if settings is not None else PoseSettings()
-    arr = np.asarray(data, dtype=np.float64)
-    if arr.ndim != 2:
-        raise CalibrationError("data must be rows of the session, shape (N, K)")
+    s = options.instance(settings if settings is not None else PoseSettings(), PoseSettings,
+                         "settings", "a PoseSettings (or None)")
+    if names is not None and (isinstance(names, (str, bytes)) or not isinstance(names, Sequence)
+                              or not all(isinstance(n, str) for n in names)):
+        raise CalibrationError(f"names must be the column names (a sequence of str) or None, "
+                               f"got {names!r:.60}")
+    arr = as_samples(data, "data", channels="xyz+")
     how = s.resolve(names, arr[:HEAD_ROWS], accel=accel)
     return detect_poses(arr, **how.kwargs), how
 

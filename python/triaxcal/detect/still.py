@@ -10,6 +10,7 @@ import numpy as np
 
 from .._checks import options as opt
 from ..errors import CalibrationError
+from ..quality.bounds import sample_rate
 from ._segmenter import TOO_SHORT, Rejection, _as_samples
 
 
@@ -93,14 +94,14 @@ def detect_still(
     StillDetection
     """
     arr = _as_samples(samples, allow_empty=False)[:, :3]
-    rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
+    rate = sample_rate(rate_hz)
     win_s = opt.number(window_s, "window_s", gt=0, hint="seconds, imu_tk uses 1-2")
     rest_len = opt.number(rest_s, "rest_s", gt=0, hint="seconds of initial rest")
     kk = opt.number(k, "k", gt=0, hint="threshold multiplier, imu_tk sweeps 1..10")
     min_dur = opt.number(min_duration_s, "min_duration_s", ge=0, hint="seconds")
     given_rest = opt.optional_number(rest_level, "rest_level", gt=0, hint="input units^2")
     n = arr.shape[0]
-    w = round(win_s * rate)
+    w = opt.samples(win_s, rate, "window_s")
     if w < 2:
         raise CalibrationError(
             f"window_s={win_s:g} s is {win_s * rate:.3g} samples at {rate:g} Hz; a variance "
@@ -111,7 +112,7 @@ def detect_still(
             f"only {n} samples, fewer than one {win_s:g} s window ({w} samples); record longer"
         )
     if given_rest is None:
-        nr = round(rest_len * rate)
+        nr = opt.samples(rest_len, rate, "rest_s")
         if nr < w:
             raise CalibrationError(
                 f"rest_s={rest_len:g} s ({nr} samples) is shorter than the window ({w} samples); "
@@ -132,7 +133,7 @@ def detect_still(
     still = level < thr
     edges = np.flatnonzero(np.diff(np.concatenate(([0], still.astype(np.int8), [0]))))
     starts, ends = edges[0::2], edges[1::2]
-    min_n = round(min_dur * rate)
+    min_n = opt.samples(min_dur, rate, "min_duration_s")
     intervals: list[tuple[int, int]] = []
     rejected: list[Rejection] = []
     for a, b in zip(starts.tolist(), ends.tolist()):

@@ -38,6 +38,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from .._checks import options
 from ..calibration.file import SENSORS, Calibration
 from ..conventions.units import unit_factor
 from ..errors import CalibrationError
@@ -208,7 +209,11 @@ def write_outputs(
     from ..report.figure import plot_report
     from ..report.quality import have_matplotlib, quality_report
 
-    out = Path(out_dir)
+    if not isinstance(cal, Calibration):
+        raise CalibrationError(f"expected a Calibration, got {type(cal).__name__}")
+    points_by_sensor = options.mapping(points_by_sensor, "points_by_sensor")
+    plot = options.flag(plot, "plot")
+    out = Path(options.path(out_dir, "out_dir"))
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

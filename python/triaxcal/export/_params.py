@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.spelling import opt
 from ..calibration.file import Calibration
 from ..calibration.part import SensorCalibration
 from ..conventions.units import per_unit, unit_factor
@@ -119,12 +120,18 @@ def _factor(src: str, dst: str, sensor: str, fmt: str, what: str) -> float:
 def pick_sensors(cal: Calibration, sensors: Iterable[str] | None, supported: tuple[str, ...],
                  fmt: str) -> tuple[str, ...]:
     """The parts to export: ``sensors`` (checked) or every part ``fmt`` supports."""
+    if not isinstance(cal, Calibration):
+        raise CalibrationError(f"expected a Calibration, got {type(cal).__name__}")
+    if sensors is not None and (isinstance(sensors, (str, bytes)) or not isinstance(
+            sensors, Iterable)):
+        raise CalibrationError(f"{opt('sensors')} must be a list of sensor names ("
+                               f"{', '.join(supported)}), got {sensors!r:.60}")
     if sensors is None:
         chosen = tuple(s for s in cal.sensors if s in supported)
     else:
         chosen = tuple(dict.fromkeys(sensors))
         for s in chosen:
-            if s not in supported:
+            if not isinstance(s, str) or s not in supported:
                 raise CalibrationError(f"{fmt} holds no {s} calibration (it holds: "
                                        f"{', '.join(supported)})")
             cal.part(s)  # a clear error when missing

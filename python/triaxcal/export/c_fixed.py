@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from ..calibration.file import Calibration
 from ..calibration.part import SensorCalibration
 from ..errors import CalibrationError
@@ -87,9 +88,8 @@ def fixed_point(part: SensorCalibration, *, out_scale: float | None = None) -> F
     if out_scale is None:
         mx = float(np.max(np.abs(m)))
         out_scale = 2.0 ** (-math.floor(math.log2(mx)))
-    out_scale = float(out_scale)
-    if not (math.isfinite(out_scale) and out_scale > 0):
-        raise CalibrationError(f"out_scale must be a positive number, got {out_scale}")
+    out_scale = options.magnitude(out_scale, "out_scale",
+                                  hint="output counts per calibrated unit")
     one = 1 << FRAC_BITS
     ms = m * out_scale
     if np.max(np.abs(ms)) >= 127:

@@ -48,10 +48,12 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from .._checks.spelling import opt
 from .._core import __version__
 from ..calibration.file import Calibration
 from ..errors import CalibrationError
+from ..quality.bounds import sample_rate
 from ._params import physical, require_no_gain_poly
 from ._trust import Scales, mark_lines, prepare
 
@@ -131,13 +133,8 @@ def kalibr_intrinsics(cal: Calibration, *, counts_per_unit: Mapping[str, Any] | 
 
 
 def _num(v: Any, name: str, positive: bool = True) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-        raise CalibrationError(f"{name} must be a number, got {v!r}")
-    f = float(v)
-    if not math.isfinite(f) or (positive and f <= 0):
-        raise CalibrationError(f"{name} must be a finite number > 0 (Kalibr refuses others), "
-                               f"got {f}")
-    return f
+    return options.number(v, name, gt=0 if positive else None,
+                          hint="Kalibr refuses others" if positive else "")
 
 
 def _mat(m: np.ndarray) -> str:
@@ -194,7 +191,9 @@ def kalibr_imu_yaml(
     if not isinstance(topic, str) or not _ROS_NAME.match(topic):
         raise CalibrationError(f"topic {topic!r} is not a ROS topic name (e.g. /imu0, "
                                "/imu/data_raw)")
-    rate = _num(rate_hz, "rate_hz")
+    rate = sample_rate(rate_hz)
+    if cal is not None and not isinstance(cal, Calibration):
+        raise CalibrationError(f"expected a Calibration or None, got {type(cal).__name__}")
     lines = [f"# Kalibr IMU configuration written by triaxcal {__version__}"]
     marks: list[str] = []
     if cal is not None:

@@ -26,6 +26,7 @@ from .._checks.arrays import (
     as_radius,
     as_real,
     as_vector,
+    lengths,
     require_radius,
 )
 from .._core import apply as _core_apply
@@ -537,10 +538,14 @@ def information_criterion(fit: EllipsoidFit, points: Any, criterion: str = "bic"
     Lower is better. ``BIC = n ln(RSS / n) + k ln(n)``; ``AIC = n ln(RSS / n) + 2 k``.
     """
     as_choice(criterion, "criterion", ("bic", "aic"))
-    pts = as_points(points)
-    res = np.linalg.norm(fit.apply(pts), axis=1) / fit.radius - 1.0
-    n = len(res)
-    rss = max(float(res @ res), 1e-300)
+    if not isinstance(fit, EllipsoidFit):
+        raise CalibrationError(f"fit must be an EllipsoidFit (from fit_ellipsoid), got "
+                               f"{type(fit).__name__}")
+    pts = as_points(points, min_rows=1)
+    with np.errstate(over="ignore"):  # points far from the fit: an infinite criterion
+        res = lengths(fit.apply(pts)) / fit.radius - 1.0
+        n = len(res)
+        rss = max(float(res @ res), 1e-300)
     k = N_PARAMS.get(fit.model, 9) - len(fit.fixed)  # free parameters only
     if criterion == "bic":
         pen = k * math.log(n)

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from .._checks.arrays import as_choice, as_count, as_points, as_real
+from .._checks.arrays import lengths as row_lengths
 from .._checks.spelling import opt
 from ..errors import CalibrationError
 from .ellipsoid import (  # model choice lives beside the fit, which dispatches model="auto" to it
@@ -157,10 +158,17 @@ def fit_robust(
     threshold = ROBUST_Z if rule == "robust" else sigma
 
     def _within(norms: np.ndarray, t: float) -> np.ndarray:
-        return _kept(norms, rule, t)
+        # the rules are scale-free: lengths scaled by a power of two (exact) near 1, so that
+        # their means and spreads cannot overflow for readings near the edge of a double
+        if not np.isfinite(norms).all():
+            raise CalibrationError(
+                "the calibrated lengths overflow double precision (radius "
+                f"{radius!r}): give the radius in a unit the readings can be scaled to")
+        _, e = np.frexp(np.max(norms, initial=1.0))
+        return _kept(np.ldexp(norms, -e), rule, t)
 
     if lengths == "raw" and not off:
-        norms = np.linalg.norm(pts, axis=1)
+        norms = row_lengths(pts)
         keep = _within(norms, threshold)
     fit, auto = _fit(pts[keep], model, radius, kwargs)
     rounds = 1 if lengths == "raw" and not off else 0
@@ -168,7 +176,7 @@ def fit_robust(
     if not off:
         converged = False
         while rounds < max_rounds:
-            norms = np.linalg.norm(fit.apply(pts), axis=1)
+            norms = row_lengths(fit.apply(pts))
             new = _within(norms, threshold)
             rounds += 1
             if np.array_equal(new, keep):
@@ -183,7 +191,7 @@ def fit_robust(
             keep = new
             fit, auto = _fit(pts[keep], model, radius, kwargs)
         else:
-            converged = bool(np.array_equal(_within(np.linalg.norm(fit.apply(pts), axis=1),
+            converged = bool(np.array_equal(_within(row_lengths(fit.apply(pts)),
                                                     threshold), keep))
     rejected = np.flatnonzero(~keep)
     rejected.setflags(write=False)

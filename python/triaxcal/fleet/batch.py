@@ -59,6 +59,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from .._checks import options
 from .._checks.fields import parse_json
 from ..calibration.file import Calibration
 from ..calibration.part import SensorCalibration
@@ -528,6 +529,12 @@ class _Progress:
             self.stream.flush()
 
 
+#: Most worker processes one batch may start (each holds a Python interpreter and numpy, about
+#: 30-60 MB): a larger ``jobs`` (``--jobs``) is refused by name, and no more workers than
+#: boards are ever started.
+MAX_JOBS = 1024
+
+
 def batch_fit(
     sources: Sequence[tuple[str, Any]],
     *,
@@ -555,7 +562,8 @@ def batch_fit(
     prefix : str
         C identifier prefix of the headers.
     jobs : int, optional
-        Worker processes (default: the number of CPUs; 1: in this process).
+        Worker processes (default: the number of CPUs; 1: in this process; at most
+        :data:`MAX_JOBS`, and never more than there are boards).
     progress : text stream, optional
         Where the progress bar goes.
 
@@ -569,6 +577,8 @@ def batch_fit(
     request = request if request is not None else batch_request()
     limits = limits or Limits()
     prefix = _ident(prefix)
+    n_jobs = (os.cpu_count() or 1) if jobs is None else options.integer(
+        jobs, "jobs", ge=1, le=MAX_JOBS, hint="worker processes; 1 fits in this process")
     ids = [safe_id(i) for i, _ in sources]
     seen: dict[str, int] = {}
     for k, i in enumerate(ids):
@@ -581,13 +591,11 @@ def batch_fit(
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
     work = [(ids[k], src, request, limits, out, prefix) for k, (_, src) in enumerate(sources)]
-    n_jobs = jobs if jobs is not None else (os.cpu_count() or 1)
-    if n_jobs < 1:
-        raise CalibrationError(f"jobs must be >= 1, got {n_jobs}")
+    n_jobs = min(n_jobs, len(work))  # no more processes than boards
     bar = _Progress(len(work), progress)
     results: list[BoardResult] = []
     failed = 0
-    if n_jobs == 1 or len(work) < 2:
+    if n_jobs <= 1:
         for w in work:
             r = _work(w)
             results.append(r)

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
+from .._checks.arrays import as_matrix3
 from ..errors import CalibrationError
 from .protocol import crc16_modbus
 
@@ -70,19 +72,17 @@ def encode_motioncal(
     soft_iron: Any = None,
 ) -> bytes:
     """The 68-byte packet from values already in MotionCal's units (see MotionCalPacket)."""
-    si = np.eye(3) if soft_iron is None else np.asarray(soft_iron, dtype=float)
-    if si.shape != (3, 3):
-        raise CalibrationError(f"soft_iron must be 3x3, got shape {si.shape}")
+    si = np.eye(3) if soft_iron is None else as_matrix3(soft_iron, "soft_iron")
     if not np.allclose(si, si.T, rtol=1e-6, atol=1e-9):
         raise CalibrationError(
             "the MotionCal packet holds a symmetric soft-iron matrix (6 terms); this one is not "
             "symmetric: fit with model='full' or use the C header instead"
         )
     vals = [
-        *np.asarray(accel_offset, float).ravel(),
-        *np.asarray(gyro_offset, float).ravel(),
-        *np.asarray(mag_offset, float).ravel(),
-        float(field),
+        *options.vector3(accel_offset, "accel_offset"),
+        *options.vector3(gyro_offset, "gyro_offset"),
+        *options.vector3(mag_offset, "mag_offset"),
+        options.number(field, "field", hint="uT"),
         si[0, 0], si[1, 1], si[2, 2], si[0, 1], si[0, 2], si[1, 2],
     ]
     if len(vals) != 16:
@@ -95,6 +95,8 @@ def encode_motioncal(
 
 def decode_motioncal(data: bytes) -> MotionCalPacket:
     """Parse and check a 68-byte MotionCal packet (header bytes 117, 84 and the CRC)."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise CalibrationError(f"data must be the packet's bytes, got {type(data).__name__}")
     data = bytes(data)
     if len(data) != MOTIONCAL_SIZE:
         raise CalibrationError(f"a MotionCal packet has {MOTIONCAL_SIZE} bytes, got {len(data)}")

@@ -35,7 +35,13 @@ SENSOR_NAMES = ("accel", "gyro", "mag")
 
 
 def _frozen(a: Any, shape_tail: tuple[int, ...], what: str) -> np.ndarray:
-    arr = np.ascontiguousarray(a, dtype=np.float64)
+    try:
+        arr = np.asarray(a) if not isinstance(a, (str, bytes, dict)) else None
+    except (TypeError, ValueError):  # ragged lists
+        arr = None
+    if arr is None or arr.dtype.kind not in "iuf":
+        raise CalibrationError(f"{what} must hold real numbers, got {str(a)[:60]!r}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
         want = "(N)" if not shape_tail else f"(N, {', '.join(map(str, shape_tail))})"
         raise CalibrationError(f"{what} must have shape {want}, got {arr.shape}")

@@ -35,6 +35,7 @@ from typing import Any, BinaryIO, Iterator
 
 import numpy as np
 
+from .._checks import options
 from .._checks.spelling import opt
 from ..errors import CalibrationError
 from .files import open_regular, os_error_message
@@ -503,7 +504,10 @@ def read_table(
     >>> t.names, t.data.shape, t.notes[0][:46]
     (('t', 'ax', 'ay', 'az'), (2, 4), 'line 4, the last, is cut short and was skipped')
     """
-    p = Path(path)
+    p = Path(options.path(path, "path"))
+    max_columns = options.integer(max_columns, "max_columns", ge=1)
+    max_line_bytes = options.integer(max_line_bytes, "max_line_bytes", ge=1)
+    max_values = options.integer(max_values, "max_values", ge=1)
     r = _Reader(p, skip_bad_lines=skip_bad_lines, max_columns=max_columns,
                 max_line_bytes=max_line_bytes)
     try:

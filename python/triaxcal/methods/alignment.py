@@ -34,7 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from .._checks.arrays import as_points
+from .._checks import options as opt
+from .._checks.arrays import as_matrix3, as_points, as_samples
 from ..conventions.rotations import (
     MAX_MOUNTING_DEG,
     MOUNTINGS,
@@ -70,6 +71,25 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / n
 
 
+def _rotation(value: Any, name: str = "rotation") -> np.ndarray:
+    """A rotation matrix (3x3, orthonormal, determinant +1, to 1e-6): one that is not would
+    distort the headings silently."""
+    r = as_matrix3(value, name)
+    if not (np.allclose(r @ r.T, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0):
+        raise CalibrationError(
+            f"{opt.named(name)} must be a rotation (orthonormal, determinant +1), got "
+            f"{np.round(r, 6).tolist()}")
+    return r
+
+
+def _calibration(value: Any, name: str) -> Any:
+    """A calibration to apply first (anything with ``apply``: a SensorCalibration, a fit)."""
+    if value is not None and not callable(getattr(value, "apply", None)):
+        raise CalibrationError(f"{opt.named(name)} must be a SensorCalibration (or a fit) to "
+                               f"apply first, or None, got {type(value).__name__}")
+    return value
+
+
 def _skew(w: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
@@ -94,9 +114,9 @@ def dip_angles(accel: Any, mag: Any, rotation: Any = None) -> np.ndarray:
     ``accel`` (P, 3) is the specific force (up at rest), ``mag`` (P, 3) the field in the
     magnetometer frame, ``rotation`` (default identity) turns it into the accelerometer frame.
     """
-    u = _unit(as_points(accel, name="accel"))
-    n = _unit(as_points(mag, name="mag"))
-    r = np.eye(3) if rotation is None else np.asarray(rotation, float)
+    u = _unit(as_samples(accel, "accel"))
+    n = _unit(as_samples(mag, "mag"))
+    r = np.eye(3) if rotation is None else _rotation(rotation)
     return np.degrees(np.arcsin(np.clip(-np.einsum("ij,ij->i", u, n @ r.T), -1.0, 1.0)))
 
 
@@ -272,12 +292,12 @@ def paired_still_poses(mag: Any, accel: Any, *, window: int = 25,
     """
     from ..detect import detect_poses
 
-    mag = as_points(mag, name="mag")
-    accel = as_points(accel, name="accel")
+    mag = as_samples(mag, "mag")
+    accel = as_samples(accel, "accel")
     if len(mag) != len(accel):
         raise CalibrationError(f"mag has {len(mag)} readings and accel {len(accel)}: give "
                                "both sensors at the same instants")
-    thr_g = 0.07 if threshold is None else float(threshold) / units_per_g
+    thr_g = 0.07 if threshold is None else opt.magnitude(threshold, "threshold") / units_per_g
     field_mag = float(np.median(np.linalg.norm(mag, axis=1)))
     spans = []
     for data, thr in ((accel, thr_g * units_per_g), (mag, thr_g * field_mag)):
@@ -374,27 +394,26 @@ def align_mag_accel(
     >>> al.mounting.name, round(al.mounting_residual_deg, 6), round(al.dip_deg, 2)
     ('ROTATION_YAW_90', 0.0, 66.04)
     """
-    m = as_points(mag, name="mag")
-    a = as_points(accel, name="accel")
+    m = as_samples(mag, "mag")
+    a = as_samples(accel, "accel")
     if len(m) != len(a):
         raise CalibrationError(
             f"mag has {len(m)} readings and accel {len(a)}: give both sensors at the same "
             "instants (resample one onto the other's times first)")
-    if not (np.isfinite(m).all() and np.isfinite(a).all()):
-        raise CalibrationError("readings must be finite (no NaN or inf)")
-    if mag_cal is not None:
-        m = mag_cal.apply(m)
-    if accel_cal is not None:
-        a = accel_cal.apply(a)
+    h = opt.number(holdout, "holdout", ge=0, lt=0.75, hint="a share of the poses")
+    inc = opt.optional_number(expected_inclination_deg, "expected_inclination_deg", ge=-90,
+                              le=90, hint="degrees")
+    detect = opt.flag(detect, "detect")
+    if _calibration(mag_cal, "mag_cal") is not None:
+        m = as_samples(mag_cal.apply(m), "mag (calibrated)")
+    if _calibration(accel_cal, "accel_cal") is not None:
+        a = as_samples(accel_cal.apply(a), "accel (calibrated)")
     spans: list[tuple[int, int]] = []
     if detect:
         m, a, spans = paired_still_poses(m, a, window=window, threshold=threshold,
                                          units_per_g=_units_per_g(accel_cal))
     p = len(m)
-    h = float(holdout)
-    if not 0.0 <= h < 0.75:
-        raise CalibrationError(f"holdout must be a share in 0..0.75, got {holdout!r}")
-    heldout = (np.arange(p)[(np.arange(p) % max(int(round(1 / h)), 2)) == 1]
+    heldout = (np.arange(p)[(np.arange(p) % max(round(min(1 / h, p + 1)), 2)) == 1]
                if h > 0 and p >= 12 else np.zeros(0, dtype=int))
     fit_idx = np.setdiff1d(np.arange(p), heldout)
     if len(fit_idx) < 6:
@@ -432,8 +451,7 @@ def align_mag_accel(
             f"(standard error {', '.join(f'{se[k]:.2g}' for k in range(3) if se[k] >= 2)} deg): "
             "the poses turn about too few axes; add poses tilted about that axis")
     dip = math.degrees(math.asin(max(-1.0, min(1.0, -s))))
-    if expected_inclination_deg is not None:
-        inc = float(expected_inclination_deg)
+    if inc is not None:
         if abs(inc) > 5 and abs(dip) > 5 and math.copysign(1, inc) != math.copysign(1, dip):
             raise CalibrationError(
                 f"the fitted dip is {dip:.1f} deg but the World Magnetic Model gives "
@@ -475,16 +493,17 @@ def _frozen(x: Any, dtype: Any = float) -> np.ndarray:
 
 
 def _up_north(accel: Any, mag: Any, rotation: Any) -> tuple[np.ndarray, np.ndarray]:
-    u = _unit(as_points(accel, name="accel"))
-    f = as_points(mag, name="mag")
+    u = _unit(as_samples(accel, "accel"))
+    f = as_samples(mag, "mag")
     if rotation is not None:
-        f = f @ np.asarray(rotation, float).T
+        f = f @ _rotation(rotation).T
     if len(f) != len(u):
         raise CalibrationError(f"accel has {len(u)} readings and mag {len(f)}: they must pair")
     h = f - np.einsum("ij,ij->i", f, u)[:, None] * u
     hn = np.linalg.norm(h, axis=1)
-    if np.any(hn < 1e-9 * np.linalg.norm(f, axis=1)):
-        raise CalibrationError("the field is vertical in some pose: no heading can be defined")
+    if np.any(~(hn > 1e-9 * np.linalg.norm(f, axis=1))):
+        raise CalibrationError("the field is vertical (or zero) in some pose: no heading can be "
+                               "defined")
     return u, h / hn[:, None]
 
 
@@ -500,14 +519,23 @@ def axis_heading(accel: Any, mag: Any, *, axis: Any = 0, rotation: Any = None) -
     [0.0]
     """
     u, n = _up_north(accel, mag, rotation)
-    if isinstance(axis, (int, np.integer)):
+    if isinstance(axis, (int, np.integer)) and not isinstance(axis, (bool, np.bool_)):
         if not 0 <= int(axis) <= 2:
             raise CalibrationError(f"axis must be 0, 1, 2 or a 3-vector, got {axis!r}")
         b = np.eye(3)[int(axis)]
     else:
-        b = np.asarray(axis, float).reshape(3)
+        b = _unit(opt.vector3(axis, "axis", hint="0, 1, 2 or a direction in the "
+                              "accelerometer's frame"))
     e = np.cross(n, u)  # north x up = east
-    return np.degrees(np.arctan2(e @ b, n @ b)) % 360.0
+    east, north = e @ b, n @ b
+    # an axis (nearly) along the vertical in some reading points nowhere on the compass
+    level = np.hypot(east, north)
+    if (level < 1e-6).any():
+        k = int(np.flatnonzero(level < 1e-6)[0])
+        raise CalibrationError(
+            f"the axis points straight up or down in reading {k}: it has no heading there "
+            "(take the heading of a horizontal axis)")
+    return np.degrees(np.arctan2(east, north)) % 360.0
 
 
 def heading_errors(accel: Any, mag: Any, orientation: Any, *, rotation: Any = None
@@ -520,7 +548,13 @@ def heading_errors(accel: Any, mag: Any, orientation: Any, *, rotation: Any = No
     compared with it about the vertical.
     """
     u, n = _up_north(accel, mag, rotation)
-    o = np.asarray(orientation, float)
+    try:
+        o = np.asarray(orientation)
+    except (TypeError, ValueError):
+        o = np.zeros(0, dtype=object)
+    if o.dtype.kind not in "iuf" or not np.isfinite(o.astype(np.float64)).all():
+        raise CalibrationError("orientation must hold finite rotation matrices, shape (P, 3, 3)")
+    o = o.astype(np.float64)
     if o.shape != (len(u), 3, 3):
         raise CalibrationError(f"orientation must have shape ({len(u)}, 3, 3), got {o.shape}")
     est = np.stack([n, np.cross(u, n), u], axis=1)  # rows: north, west, up (body coords)

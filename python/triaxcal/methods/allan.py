@@ -27,8 +27,10 @@ from typing import Any, Union
 
 import numpy as np
 
+from .._checks import options as opt
 from .._core import AllanStream as _CoreAllanStream
 from ..errors import CalibrationError, NonFiniteError
+from ..quality.bounds import sample_rate
 
 __all__ = [
     "DEFAULT_EXACT_UP_TO",
@@ -75,13 +77,14 @@ def cluster_sizes(taus: Taus, rate_hz: float, max_m: int) -> np.ndarray:
         return m[(m >= 1) & (m <= max_m)].astype(np.uint64)
     try:
         t = np.asarray(taus, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise CalibrationError(
             f"taus must be 'octave', 'log' or numbers in seconds, got {taus!r}"
         ) from None
     if t.size == 0 or not np.isfinite(t).all() or (t <= 0).any():
         raise CalibrationError(f"taus must be finite times in seconds > 0, got {t.tolist()}")
-    m = np.round(t * rate)
+    with np.errstate(over="ignore"):  # a tau past any recording: dropped below
+        m = np.round(t * rate)
     if (m < 1).any():
         raise CalibrationError(
             f"taus shorter than one sample (1 / {rate:g} Hz = {1 / rate:g} s): "
@@ -96,23 +99,14 @@ def cluster_sizes(taus: Taus, rate_hz: float, max_m: int) -> np.ndarray:
 
 
 def _rate(rate_hz: Any) -> float:
-    try:
-        r = float(rate_hz)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"rate_hz must be a number in Hz, got {rate_hz!r}") from None
-    if not (math.isfinite(r) and r > 0):
-        raise CalibrationError(f"rate_hz must be a finite number of Hz > 0, got {rate_hz!r}")
-    return r
+    return sample_rate(rate_hz)
 
 
 def _exact(value: Any) -> int | None:
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise CalibrationError(
-            f"exact_up_to must be a whole number of samples >= 1 or None, got {value!r}"
-        )
-    return int(value)
+    return opt.integer(value, "exact_up_to", ge=1, le=_STREAM_MAX_M,
+                       hint="samples, or None")
 
 
 @dataclass(frozen=True)
@@ -236,8 +230,8 @@ class AllanAccumulator:
         self.axes = int(axes)
         max_m = _STREAM_MAX_M
         if max_tau_s is not None:
-            mt = float(max_tau_s)
-            if not (math.isfinite(mt) and mt * self.rate_hz >= 1):
+            mt = opt.number(max_tau_s, "max_tau_s", gt=0, hint="seconds")
+            if not mt * self.rate_hz >= 1:
                 raise CalibrationError(
                     f"max_tau_s must be at least one sample ({1 / self.rate_hz:g} s), got "
                     f"{max_tau_s!r}"
@@ -369,7 +363,10 @@ def allan(
     if isinstance(samples, np.ndarray) or (
         not isinstance(samples, Iterable) or isinstance(samples, (list, tuple))
     ):
-        arr = np.asarray(samples) if not isinstance(samples, np.ndarray) else samples
+        try:
+            arr = np.asarray(samples) if not isinstance(samples, np.ndarray) else samples
+        except (TypeError, ValueError):  # ragged lists
+            arr = np.zeros(0, dtype=object)
         if arr.dtype.kind not in "iuf":
             raise CalibrationError(
                 f"samples must hold real numbers (integer or float), got dtype {arr.dtype}"

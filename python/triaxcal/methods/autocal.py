@@ -46,14 +46,18 @@ readings exceed 40 degC).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+import os
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
 
+from .._checks import options as opt
+from .._checks.arrays import as_samples
 from ..errors import CalibrationError
+from ..quality.bounds import sample_rate
 
 __all__ = [
     "AutoCalibration",
@@ -137,14 +141,11 @@ class StillWindows:
         sd_threshold_g: float = SD_THRESHOLD_G,
         max_abs_g: float = MAX_ABS_G,
     ) -> None:
-        for name, v in (("rate_hz", rate_hz), ("window_s", window_s),
-                        ("sd_threshold_g", sd_threshold_g), ("max_abs_g", max_abs_g)):
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not (
-                    math.isfinite(float(v)) and float(v) > 0):
-                raise CalibrationError(f"{name} must be a number > 0, got {v!r}")
-        self.rate_hz = float(rate_hz)
-        self.window_s = float(window_s)
-        self.wlen = int(round(self.window_s * self.rate_hz))
+        self.rate_hz = sample_rate(rate_hz)
+        self.window_s = opt.number(window_s, "window_s", gt=0, hint="seconds")
+        sd_threshold_g = opt.magnitude(sd_threshold_g, "sd_threshold_g", hint="g")
+        max_abs_g = opt.magnitude(max_abs_g, "max_abs_g", hint="g")
+        self.wlen = opt.samples(self.window_s, self.rate_hz, "window_s")
         if self.wlen < 2:
             raise CalibrationError(
                 f"a {window_s:g} s window at {rate_hz:g} Hz holds {self.wlen} sample(s): need "
@@ -162,10 +163,10 @@ class StillWindows:
 
     def update(self, acc: Any, temp_c: Any = None) -> None:
         """Add the next ``(n, 3)`` samples in g (and their ``(n,)`` temperatures in degC)."""
-        a = np.asarray(acc, dtype=np.float64)
-        if a.ndim != 2 or a.shape[1] != 3:
-            raise CalibrationError(
-                f"acceleration must have shape (N, 3) in g, got {a.shape}")
+        a = as_samples(acc, "acc", finite=False)  # a NaN sample leaves its window out
+        if a.size and (np.isinf(a).any()
+                       or np.nanmax(np.abs(a), initial=0.0) > opt.MAGNITUDE[1]):
+            as_samples(a[~np.isnan(a).any(axis=1)], "acc")  # refused, naming the reading
         has_t = temp_c is not None
         if self._temp is None:
             self._temp = has_t
@@ -173,7 +174,7 @@ class StillWindows:
             raise CalibrationError("give the temperature with every chunk or with none")
         t = None
         if has_t:
-            t = np.asarray(temp_c, dtype=np.float64).reshape(-1)
+            t = _temperatures(temp_c)
             if len(t) != len(a):
                 raise CalibrationError(
                     f"{len(t)} temperatures for {len(a)} samples: give one per sample")
@@ -339,8 +340,13 @@ def fit_still_windows(
     See :func:`autocalibrate` for the options; this is its second half, for window statistics
     gathered elsewhere (e.g. merged from several files of one recording).
     """
-    if stop not in ("parameters", "ggir"):
-        raise CalibrationError(f"stop must be 'parameters' or 'ggir', got {stop!r}")
+    opt.choice(stop, "stop", ("parameters", "ggir"))
+    use_temperature = opt.flag(use_temperature, "use_temperature")
+    sphere_crit_g = opt.number(sphere_crit_g, "sphere_crit_g", ge=0, le=2, hint="g")
+    max_error_g = opt.number(max_error_g, "max_error_g", gt=0, hint="g")
+    max_iter = opt.integer(max_iter, "max_iter", ge=1, le=1_000_000)
+    tol = opt.number(tol, "tol", gt=0)
+    min_hours = opt.number(min_hours, "min_hours", ge=0, hint="hours")
     means = np.asarray(stats.means, dtype=np.float64)
     temps = stats.temps if (use_temperature and stats.temps is not None) else None
     settings = {"window_s": stats.window_s, "use_temperature": temps is not None,
@@ -428,8 +434,26 @@ def fit_still_windows(
         iterations=it, temp_range_c=trange, **base)
 
 
+def _temperatures(temp_c: Any) -> np.ndarray:
+    """One temperature (degC) per sample, as float64 (NaN allowed: its window is left out)."""
+    try:
+        t = np.asarray(temp_c)
+    except (TypeError, ValueError):
+        t = np.zeros(0, dtype=object)
+    if t.dtype.kind not in "iuf" or t.ndim > 2:
+        raise CalibrationError(
+            f"temp_c must hold one temperature (degC) per sample as real numbers, got "
+            f"{str(temp_c)[:60]!r}")
+    return t.astype(np.float64).reshape(-1)
+
+
 def _chunks(acc: Any, temp_c: Any, step: int) -> Iterator[tuple[Any, Any]]:
     """(acc chunk, temp chunk) pairs from arrays (sliced) or from an iterable of chunks."""
+    if isinstance(acc, (str, bytes, os.PathLike, Mapping)):
+        raise CalibrationError(
+            f"acc must be the readings, an (N, 3) array in g or an iterable of chunks, got "
+            f"{type(acc).__name__} {str(acc)[:60]!r}: read a file first (read_wearable, "
+            "read_table), or give a file to triaxcal.dask.autocalibrate_many")
     if isinstance(acc, list):  # rows, or a list of chunks
         try:
             arr = np.asarray(acc, dtype=np.float64)
@@ -437,7 +461,8 @@ def _chunks(acc: Any, temp_c: Any, step: int) -> Iterator[tuple[Any, Any]]:
             arr = None
         if arr is not None and arr.ndim == 2:
             acc = arr
-    if temp_c is not None and not hasattr(temp_c, "__getitem__"):
+    if temp_c is not None and (not hasattr(temp_c, "__getitem__") or not hasattr(temp_c, "__len__")
+                               or isinstance(temp_c, (str, bytes, Mapping))):
         raise CalibrationError("temp_c must be an array of one temperature (degC) per sample")
     if hasattr(acc, "shape") and hasattr(acc, "__getitem__"):
         shape = tuple(acc.shape)
@@ -538,9 +563,9 @@ def autocalibrate(
     """
     sw = StillWindows(rate_hz, window_s=window_s, sd_threshold_g=sd_threshold_g,
                       max_abs_g=max_abs_g)
-    if not (isinstance(chunk_s, (int, float)) and chunk_s > 0):
-        raise CalibrationError(f"chunk_s must be > 0 s, got {chunk_s!r}")
-    step = max(1, int(round(chunk_s * sw.rate_hz / sw.wlen))) * sw.wlen
+    chunk_s = opt.number(chunk_s, "chunk_s", gt=0, hint="seconds")
+    opt.text_stream(progress, "progress")
+    step = max(1, round(opt.samples(chunk_s, sw.rate_hz, "chunk_s") / sw.wlen)) * sw.wlen
     last = 0.0
     for a, t in _chunks(acc, temp_c, step):
         sw.update(a, t)

@@ -25,11 +25,16 @@ from typing import Any
 
 import numpy as np
 
-from .._checks.arrays import as_points
+from .._checks import options as opt
+from .._checks.arrays import as_samples
 from ..errors import CalibrationError
 from ..fit.ellipsoid import EllipsoidFit, fit_batch, fit_ellipsoid
 
-__all__ = ["BootstrapIntervals", "bootstrap", "fit_params"]
+__all__ = ["MAX_BOOTSTRAP", "BootstrapIntervals", "bootstrap", "fit_params"]
+
+#: Most refits one call may ask for (each is a full fit; 10,000 resamples give 95 % intervals
+#: to well under a percent of their width; 10^7 would run for hours).
+MAX_BOOTSTRAP = 10_000
 
 #: Default tolerances: offset as a fraction of the raw radius, gains as a fraction of the gain.
 OFFSET_TOL = 0.01
@@ -227,9 +232,20 @@ def bootstrap(
     >>> ci.param_names[:3], bool(ci.lower[0] < 412 < ci.upper[0]), ci.flagged
     (('offset_x', 'offset_y', 'offset_z'), True, ())
     """
-    pts = as_points(points, min_rows=1)
+    pts = as_samples(points, "points", min_rows=1)
+    n_boot = opt.integer(n_boot, "n_boot", ge=20, le=MAX_BOOTSTRAP,
+                         hint="refits; 1000 is plenty for 95 % intervals")
+    seed = opt.seed(seed)
+    level = opt.number(level, "level", ge=0.5, le=0.999)
+    offset_tol = opt.number(offset_tol, "offset_tol", gt=0)
+    gain_tol = opt.number(gain_tol, "gain_tol", gt=0)
+    if radius is not None:
+        radius = opt.magnitude(radius, "radius")
     if fit is None:
         fit = fit_ellipsoid(pts, model=model, radius=radius, debias=debias)
+    elif not isinstance(fit, EllipsoidFit):
+        raise CalibrationError(f"fit must be an EllipsoidFit (from fit_ellipsoid) or None, got "
+                               f"{type(fit).__name__}")
     elif fit.n != len(pts):
         raise CalibrationError(
             f"fit was made on {fit.n} readings but {len(pts)} were given: pass the readings "
@@ -240,14 +256,7 @@ def bootstrap(
     # the data's own scale
     radius_opt = radius if radius is not None else (
         None if _own_scale(fit) else float(fit.radius))
-    if isinstance(n_boot, bool) or not isinstance(n_boot, (int, np.integer)) or n_boot < 20:
-        raise CalibrationError(f"n_boot must be a whole number >= 20, got {n_boot!r}")
-    if not (isinstance(level, (int, float)) and 0.5 <= level <= 0.999):
-        raise CalibrationError(f"level must be between 0.5 and 0.999, got {level!r}")
-    for name, v in (("offset_tol", offset_tol), ("gain_tol", gain_tol)):
-        if not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
-            raise CalibrationError(f"{name} must be a number > 0, got {v!r}")
-    rng = np.random.default_rng([int(seed), 0xB007])
+    rng = np.random.default_rng([seed, 0xB007])
     n = len(pts)
     if groups is None:
         resample = "readings"

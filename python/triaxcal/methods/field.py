@@ -69,7 +69,10 @@ _UNC = ("total_ut", "horizontal_ut", "inclination_deg", "declination_deg")
 def _num(value: Any, what: str, lo: float | None = None, hi: float | None = None) -> float:
     if isinstance(value, (bool, str, bytes)) or not isinstance(value, numbers.Real):
         raise CalibrationError(f"{what} must be a number, got {value!r}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an int past a double
+        v = math.inf
     if not math.isfinite(v):
         raise CalibrationError(f"{what} must be finite, got {v}")
     if (lo is not None and v < lo) or (hi is not None and v > hi):

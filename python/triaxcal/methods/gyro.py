@@ -31,6 +31,7 @@ from .._checks.spelling import opt as flag
 from ..detect import Rejection, detect_still
 from ..errors import CalibrationError
 from ..quality.bounds import GYRO_SATURATION_COUNTS
+from ..quality.bounds import sample_rate as check_rate
 from .turntable import TurntableFit, fit_turntable, turntable_plateaus
 
 __all__ = [
@@ -72,7 +73,7 @@ def _times(n: int, t: Any, rate_hz: float | None) -> np.ndarray:
         return _as_times(t, n)
     if rate_hz is None:
         raise CalibrationError("give the sample time stamps t (s) or the sampling rate rate_hz")
-    rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
+    rate = check_rate(rate_hz)
     return np.arange(n) / rate
 
 
@@ -107,7 +108,7 @@ def sample_rate(t: Any = None, rate_hz: float | None = None) -> float:
     (75.0, 200.0)
     """
     if rate_hz is not None:
-        return opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
+        return check_rate(rate_hz)
     if t is None:
         raise CalibrationError("the recording has no time stamps (a t column): give its "
                                f"sampling rate ({flag('rate_hz')}, Hz)")
@@ -119,7 +120,7 @@ def sample_rate(t: Any = None, rate_hz: float | None = None) -> float:
     if not (math.isfinite(span) and span > 0):
         raise CalibrationError("the time stamps do not advance: give the sampling rate "
                                f"({flag('rate_hz')}, Hz)")
-    return (tt.shape[0] - 1) / span
+    return check_rate((tt.shape[0] - 1) / span, "the sample rate of the time stamps t")
 
 
 def integrate_rate(rate: Any, t: Any) -> np.ndarray:
@@ -187,7 +188,7 @@ def gyro_bias(
         if rate_hz is None:
             iv = [(0, g.shape[0])]
         else:
-            rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
+            rate = check_rate(rate_hz)
             iv = detect_still(
                 g, rate_hz=rate, rest_s=rest, window_s=min(1.0, rest)
             ).intervals
@@ -487,7 +488,7 @@ def gyro_gains(
     >>> res.gain_counts_per_dps.round(1).tolist(), [r.label for r in res.rotations]
     ([nan, nan, 131.0], ['z ccw'])
     """
-    ang = opt.number(angle_deg, "angle_deg", gt=0, hint="90 on a cube, 360 for a full turn")
+    ang = opt.magnitude(angle_deg, "angle_deg", hint="90 on a cube, 360 for a full turn")
     g = _as_rate(gyro)
     tt = _times(g.shape[0], t, rate_hz)
     rest = opt.number(rest_s, "rest_s", gt=0, hint="seconds of initial rest")
@@ -495,8 +496,9 @@ def gyro_gains(
     max_frac = opt.number(max_fraction, "max_fraction", gt=1)
     min_pur = opt.number(min_purity, "min_purity", ge=0, le=1)
     both = opt.flag(require_both_directions, "require_both_directions")
-    nominal = opt.optional_number(nominal_counts_per_dps, "nominal_counts_per_dps", gt=0,
-                                  hint="131 for an MPU-6050 at +-250 deg/s")
+    nominal = None if nominal_counts_per_dps is None else opt.magnitude(
+        nominal_counts_per_dps, "nominal_counts_per_dps",
+        hint="131 for an MPU-6050 at +-250 deg/s")
     off = None if offset is None else opt.vector3(offset, "offset", hint="gyro bias")
     if not (isinstance(axes, str) and axes and set(axes) <= set(AXES)
             and len(set(axes)) == len(axes)):

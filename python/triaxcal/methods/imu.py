@@ -55,6 +55,7 @@ from .._checks.arrays import as_samples
 from ..detect import detect_still
 from ..errors import CalibrationError
 from ..fit.ellipsoid import fit_ellipsoid
+from ..quality.bounds import sample_rate
 
 __all__ = ["ImuCalibration", "SweepStep", "TriadCalibration", "calibrate_imu", "rotate_gravity"]
 
@@ -361,8 +362,8 @@ def calibrate_imu(
             f"acc has {a.shape[0]} rows, gyro {g.shape[0]}: sample them together"
         )
     n = a.shape[0]
-    rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
-    grav = opt.number(gravity, "gravity", gt=0, hint="9.80665 for m/s^2, 1.0 for g")
+    rate = sample_rate(rate_hz)
+    grav = opt.magnitude(gravity, "gravity", hint="9.80665 for m/s^2, 1.0 for g")
     rest = opt.number(rest_s, "rest_s", gt=0, hint="seconds of initial rest")
     win = opt.number(window_s, "window_s", gt=0, hint="seconds")
     min_still = opt.number(min_still_s, "min_still_s", ge=0, hint="seconds")
@@ -370,8 +371,8 @@ def calibrate_imu(
     min_p = opt.integer(min_poses, "min_poses", ge=6, hint="the per-axis model needs 6 poses")
     opt.choice(accel_model, "accel_model", ("auto", "full", "axis"))
     g_sens = opt.flag(gyro_g_sensitivity, "gyro_g_sensitivity")
-    scale_guess = opt.optional_number(gyro_scale_guess, "gyro_scale_guess", gt=0,
-                                      hint="rad/s per count")
+    scale_guess = None if gyro_scale_guess is None else opt.magnitude(
+        gyro_scale_guess, "gyro_scale_guess", hint="rad/s per count")
     iters_max = opt.integer(max_iter, "max_iter", ge=1, le=10_000)
     tol_f = opt.number(tol, "tol", ge=0, lt=1)
     g_off_given = None if gyro_offset is None else opt.vector3(gyro_offset, "gyro_offset",

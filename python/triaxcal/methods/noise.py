@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from .._checks.spelling import opt
 from ..conventions.units import UNITS, unit_factor
 from ..errors import CalibrationError
@@ -320,6 +321,9 @@ def noise_figures(
         ad = allan(data, rate_hz, taus=taus, unit=unit or "counts")
     if sensor not in ("gyro", "accel", None):
         raise CalibrationError(f"sensor must be 'gyro', 'accel' or None, got {sensor!r}")
+    if isinstance(terms, (str, bytes)) or not isinstance(terms, (tuple, list)) or not all(
+            isinstance(t, str) for t in terms):
+        raise CalibrationError(f"terms must be a non-empty subset of {TERMS}, got {terms!r:.80}")
     bad = set(terms) - set(TERMS)
     if bad or not terms:
         raise CalibrationError(f"terms must be a non-empty subset of {TERMS}, got {terms!r}")
@@ -579,6 +583,8 @@ def kalibr_noise(
     for prefix, nf, si in (("gyroscope", gyro, "rad/s"), ("accelerometer", accel, "m/s^2")):
         if nf is None:
             continue
+        options.instance(nf, NoiseFigures, "gyro" if prefix == "gyroscope" else "accel",
+                      "NoiseFigures (from noise_figures) or None")
         want = "gyro" if prefix == "gyroscope" else "accel"
         if nf.unit not in UNITS or UNITS[nf.unit][0] != want:
             raise CalibrationError(
@@ -687,6 +693,11 @@ def plot_allan(nf: NoiseFigures, path: str | Path, *, title: str | None = None,
     CalibrationError
         If matplotlib (the ``plot`` extra) is not installed.
     """
+    options.instance(nf, NoiseFigures, "nf", "NoiseFigures (from noise_figures)")
+    options.path(path, "path")
+    dpi = options.integer(dpi, "dpi", ge=20, le=600, hint="dots per inch of the PNG")
+    if title is not None and not isinstance(title, str):
+        raise CalibrationError(f"title must be text or None, got {title!r:.60}")
     if importlib.util.find_spec("matplotlib") is None:
         raise CalibrationError(
             "the Allan deviation figure needs matplotlib: pip install 'triaxcal[plot]'"

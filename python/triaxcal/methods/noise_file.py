@@ -40,7 +40,7 @@ from ..conventions.units import UNITS
 from ..errors import CalibrationError
 from ..io.logs import is_log, read_log
 from ..io.tables import iter_table, pick_columns
-from ..quality.bounds import MAX_CLOCK_STEP_BACK_S, MAX_TIME_GAP_SHARE, SAMPLE_RATE_HZ
+from ..quality.bounds import MAX_CLOCK_STEP_BACK_S, MAX_TIME_GAP_SHARE, sample_rate
 from .allan import AllanAccumulator
 from .noise import NoiseFigures, kalibr_noise, kalibr_yaml, noise_figures
 from .rest import NotAtRestError, RestCheck, RestMonitor, not_at_rest
@@ -51,22 +51,8 @@ SENSOR_CHOICES = ("gyro", "accel", "both")
 _NAMES = {"gyro": "gyroscope", "accel": "accelerometer"}
 
 
-def check_rate(rate_hz: Any, what: str = "rate_hz") -> float:
-    """``rate_hz`` as a float within :data:`~triaxcal.quality.bounds.SAMPLE_RATE_HZ`.
-
-    >>> check_rate(100)
-    100.0
-    >>> check_rate(1e300)
-    Traceback (most recent call last):
-    ...
-    triaxcal.CalibrationError: rate_hz must be a finite number in [0.001, 1e+06], got 1e+300 (a \
-sample rate in Hz: no inertial sensor is read slower than one sample in 1000 s or faster than \
-1 MHz)
-    """
-    lo, hi = SAMPLE_RATE_HZ
-    return options.number(rate_hz, what, ge=lo, le=hi,
-                          hint="a sample rate in Hz: no inertial sensor is read slower than one "
-                               f"sample in {1 / lo:g} s or faster than {hi / 1e6:g} MHz")
+#: ``rate_hz`` as a float within :data:`~triaxcal.quality.bounds.SAMPLE_RATE_HZ`.
+check_rate = sample_rate
 
 
 # --------------------------------------------------------------------------------------------

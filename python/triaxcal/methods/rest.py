@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import options
+from .._checks.arrays import as_samples
 from .._checks.spelling import opt
 from ..conventions.units import UNITS
 from ..errors import CalibrationError, RefusedError
@@ -48,6 +49,7 @@ from ..quality.bounds import (
     REST_MIN_WINDOW_SAMPLES,
     REST_WHITE_CORRELATION,
     REST_WINDOW_S,
+    sample_rate,
 )
 
 __all__ = ["NotAtRestError", "RestCheck", "RestMonitor", "check_rest", "not_at_rest"]
@@ -188,7 +190,7 @@ class RestMonitor:
 
     def __init__(self, rate_hz: float, *, sensor: str | None = None, unit: str = "counts",
                  axes: int = 3) -> None:
-        self.rate_hz = options.number(rate_hz, "rate_hz", gt=0, hint="the sample rate in Hz")
+        self.rate_hz = sample_rate(rate_hz)
         if sensor not in ("gyro", "accel", None):
             raise CalibrationError(f"sensor must be 'gyro', 'accel' or None, got {sensor!r}")
         self.sensor = sensor
@@ -336,9 +338,8 @@ def check_rest(readings: Any, rate_hz: float, *, sensor: str | None = None,
     RestCheck
         ``at_rest`` and, in :attr:`RestCheck.message`, what was found in words.
     """
-    arr = np.asarray(readings, dtype=np.float64)
-    mon = RestMonitor(rate_hz, sensor=sensor, unit=unit,
-                      axes=arr.shape[1] if arr.ndim == 2 else 1)
+    arr = as_samples(readings, "readings", channels="any")
+    mon = RestMonitor(rate_hz, sensor=sensor, unit=unit, axes=arr.shape[1])
     mon.add(arr)
     return mon.result()
 

@@ -46,9 +46,10 @@ from typing import Any
 import numpy as np
 
 from .._checks import options as opt
-from .._checks.arrays import as_samples
+from .._checks.arrays import as_samples, finite_result
 from ..errors import CalibrationError
 from ..io.sections import FERRARIS_SECTIONS, TILT_SECTIONS
+from ..quality.bounds import sample_rate
 from .imu import TriadCalibration
 
 __all__ = [
@@ -73,7 +74,10 @@ def _ro(a: Any) -> np.ndarray:
 
 
 def _readings(x: Any, name: str) -> np.ndarray:
-    arr = np.asarray(x) if not isinstance(x, (str, bytes)) else np.asarray([x])
+    try:
+        arr = np.asarray(x) if not isinstance(x, (str, bytes)) else np.asarray([x])
+    except (TypeError, ValueError):  # ragged lists: refused below, with what to pass
+        return as_samples(x, name)
     if arr.ndim == 1:
         arr = arr[None]
     if arr.ndim == 2 and arr.shape[0] == 0:
@@ -252,7 +256,7 @@ def six_position(points: Any, *, gravity: float = 1.0) -> SixPosition:
     ([100.0, 100.0, 300.0], [16400.0, 16384.0, 16300.0])
     """
     p = _readings(points, "points")
-    grav = opt.number(gravity, "gravity", gt=0, hint="1.0 for g, 9.80665 for m/s^2")
+    grav = opt.magnitude(gravity, "gravity", hint="1.0 for g, 9.80665 for m/s^2")
     if p.shape[0] < 6:
         raise CalibrationError(f"six_position needs the six faces, got {p.shape[0]} poses")
     hi, lo = p.max(axis=0), p.min(axis=0)
@@ -277,7 +281,20 @@ def six_position(points: Any, *, gravity: float = 1.0) -> SixPosition:
     bot = np.array([p[faces[f"-{a}"], i] for i, a in enumerate(AXES)])
     off = (top + bot) / 2
     cpg = (top - bot) / 2
+    _spans(cpg, np.abs(p).max(), "the six faces")
     return SixPosition(_ro(off), _ro(cpg), _ro(np.diag(grav / cpg)), faces)
+
+
+def _spans(span: np.ndarray, size: float, what: str) -> None:
+    """Refuse a response ``span`` (raw units per unit, per axis or the singular values of a
+    matrix) that is zero or lost in the round-off of readings of ``size``: ``what`` does not
+    tell the axes apart (a reading repeated, or poses mislabelled)."""
+    if not (np.all(span > 1e-9 * size) and np.all(span >= opt.MAGNITUDE[0])):
+        raise CalibrationError(
+            f"{what} do not span three axes (their responses "
+            f"{[float(f'{v:.3g}') for v in np.asarray(span)]} are zero or lost in the readings' "
+            "round-off): check that each pose or turn is about the axis it is labelled with, "
+            "and that the readings change between them")
 
 
 # --- Ferraris closed form ---------------------------------------------------------------------
@@ -385,10 +402,10 @@ def ferraris(
         raise CalibrationError(
             "; ".join(parts) + " (x_p = x axis up, x_a = x axis down, x_rot = a full turn about x)"
         )
-    rate = opt.number(rate_hz, "rate_hz", gt=0, hint="the sampling rate in Hz")
-    grav = opt.number(gravity, "gravity", gt=0, hint="9.81 for m/s^2, 1.0 for g")
-    ang = opt.number(angle_deg, "angle_deg", gt=0, hint="the size of each turn; the sense "
-                     "is read from the data")
+    rate = sample_rate(rate_hz)
+    grav = opt.magnitude(gravity, "gravity", hint="9.81 for m/s^2, 1.0 for g")
+    ang = opt.magnitude(angle_deg, "angle_deg", hint="the size of each turn; the sense "
+                        "is read from the data")
     for k in FERRARIS_SECTIONS:
         if isinstance(sections[k], (str, bytes)) or len(sections[k]) != 2:
             raise CalibrationError(f"sections[{k!r}] must be a pair (acc (N, 3), gyro (N, 3))")
@@ -408,8 +425,8 @@ def ferraris(
     # enters as ``g cos(tilt)``, second order, and the up/down pair cancels the offset exactly.
     b_a = np.diag(up + down) / 2
     a_mat = (up - down) / (2 * grav)  # raw per unit; column i = response to +1 unit along i
-    if abs(np.linalg.det(a_mat)) < 1e-12 * np.abs(a_mat).max() ** 3:
-        raise CalibrationError("the six static poses do not span three axes: check the labels")
+    size = max(float(np.abs(up).max()), float(np.abs(down).max()))
+    _spans(np.linalg.svd(a_mat * grav, compute_uv=False), size, "the six static poses")
     m_a = np.linalg.inv(a_mat)
     accel = TriadCalibration(_ro(b_a), _ro(m_a), "gravity units")
     b_g = np.vstack([gyr[k] for k in static]).mean(axis=0)
@@ -425,13 +442,34 @@ def ferraris(
     sign[sign == 0] = 1
     g_mat = w / (ang * sign)  # raw per deg/s, column i = response to +1 deg/s about i
     small = [f"{a}_rot" for i, a in enumerate(AXES)
-             if abs(g_mat[i, i]) < 0.5 * np.median(np.abs(np.diag(g_mat)))]
+             if not abs(g_mat[i, i]) >= 0.5 * np.median(np.abs(np.diag(g_mat)))
+             or g_mat[i, i] == 0]
     if small:
         raise CalibrationError(
             f"rotations too small in {', '.join(small)}: each section must hold a full "
             f"{ang:g} deg turn about its axis"
         )
+    # A turn about axis i reads mostly on gyro axis i (one package's cross-axis terms are a few
+    # percent): a section without a turn (only the bias left after subtracting the static one)
+    # or with a turn about another axis gives columns that point elsewhere, and the inverse of
+    # their matrix is a finite but meaningless gain matrix. More than 0.71 of the column on its
+    # own axis (under 45 deg off it) can hold for one column of any direction only.
+    share = np.abs(np.diag(w)) / np.maximum(np.linalg.norm(w, axis=0), np.finfo(float).tiny)
+    off = [i for i in range(3) if not share[i] > 0.71]
+    if off:
+        raise CalibrationError(
+            "the turns in " + ", ".join(
+                f"{AXES[i]}_rot ({np.degrees(np.arccos(min(share[i], 1.0))):.0f} deg off its axis)"
+                for i in off)
+            + " do not read mostly on the gyro axis they are named after: each _rot section must "
+            f"hold one {ang:g} deg turn about its own axis (a section without a turn, or with a "
+            "turn about another axis, cannot give the gyro's gains)")
+    sv = np.linalg.svd(w, compute_uv=False)
+    _spans(sv, float(sv[0]), "the three turns")
     m_g = np.linalg.inv(g_mat) * (np.pi / 180)  # rad/s per raw
+    finite_result({"accel matrix": m_a, "gyro matrix": m_g, "g_sensitivity": k_ga},
+                  "ferraris", "the readings, gravity and turn angle are out of proportion "
+                  "(check their units)")
     return FerrarisCalibration(
         accel=accel,
         gyro=TriadCalibration(_ro(b_g), _ro(m_g), "rad/s"),

@@ -35,6 +35,7 @@ import numpy as np
 from .._checks import options as opt
 from .._checks.arrays import as_samples
 from ..errors import CalibrationError
+from ..quality.bounds import DIE_TEMPERATURE_C
 
 __all__ = ["TemperatureModel", "TemperatureRangeWarning", "fit_temperature"]
 
@@ -133,14 +134,26 @@ class TemperatureModel:
 
 
 def _temperatures(temp_degC: Any) -> np.ndarray:
-    """Temperatures (degC) as float64, refusing text, booleans and complex numbers."""
-    t = np.asarray(temp_degC) if not isinstance(temp_degC, (str, bytes)) else np.asarray(
-        [temp_degC])
+    """Temperatures (degC) as float64, refusing text, booleans and complex numbers, and values
+    no sensor die takes (:data:`~triaxcal.quality.bounds.DIE_TEMPERATURE_C`)."""
+    try:
+        t = np.asarray(temp_degC) if not isinstance(temp_degC, (str, bytes)) else np.asarray(
+            [temp_degC])
+    except (TypeError, ValueError):  # ragged lists
+        raise CalibrationError(f"temp_degC must be one temperature (degrees Celsius) per "
+                               f"reading, got {str(temp_degC)[:60]!r}") from None
     if t.dtype.kind not in "iuf":
         raise CalibrationError(
             f"temp_degC must hold real numbers (degrees Celsius), got dtype {t.dtype}"
         )
-    return t.astype(np.float64)
+    t = t.astype(np.float64)
+    lo, hi = DIE_TEMPERATURE_C
+    out = ~((t >= lo) & (t <= hi)) & np.isfinite(t)
+    if out.any():
+        raise CalibrationError(
+            f"temp_degC holds {float(t[out].flat[0]):.6g} degC, outside {lo:g}..{hi:g} degC "
+            "where a sensor works: is that column a temperature, in degrees Celsius?")
+    return t
 
 
 def fit_temperature(
@@ -199,12 +212,12 @@ def fit_temperature(
         few distinct temperatures for the degree, or true values that do not excite every
         sensitivity term.
     """
-    r = as_samples(raw, "raw", finite=False)
+    r = as_samples(raw, "raw")
     t = _temperatures(temp_degC).reshape(-1)
     if t.shape[0] != r.shape[0]:
         raise CalibrationError(f"temp_degC has {t.shape[0]} values for {r.shape[0]} readings")
-    if not (np.isfinite(r).all() and np.isfinite(t).all()):
-        raise CalibrationError("raw or temp_degC contains NaN or inf; drop those samples first")
+    if not np.isfinite(t).all():
+        raise CalibrationError("temp_degC contains NaN or inf; drop those samples first")
     deg = opt.integer(degree, "degree", ge=1, le=3, hint="1 linear, 2, 3")
     ref_given = opt.optional_number(reference_degC, "reference_degC",
                                     hint="degrees Celsius, or None for the first reading")

@@ -126,8 +126,8 @@ def fit_turntable(
     """
     opt.choice(model, "model", ("full", "axis"))
     rr_list = opt.numbers_list(rates, "rates", min_len=0, gt=0, hint="the table's rate, rad/s")
-    if (isinstance(recordings, (str, bytes)) or len(recordings) != len(rr_list)
-            or not rr_list):
+    if (isinstance(recordings, (str, bytes)) or not isinstance(recordings, Sequence)
+            or len(recordings) != len(rr_list) or not rr_list):
         raise CalibrationError("give one rate per recording (and at least one recording)")
     off = opt.vector3(offset, "offset", hint="gyro bias, in the readings' units")
     win = opt.integer(window, "window", ge=1, hint="samples per averaging window")

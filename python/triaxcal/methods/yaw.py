@@ -37,8 +37,10 @@ from typing import Any
 
 import numpy as np
 
-from .._checks.arrays import as_points
+from .._checks import options as opt
+from .._checks.arrays import as_points, as_samples
 from ..errors import CalibrationError
+from .field import ExpectedField
 
 __all__ = ["YawCalibration", "fit_yaw"]
 
@@ -287,10 +289,15 @@ def fit_yaw(
     >>> np.round(y.offset, 3).tolist(), np.round(np.diag(y.matrix), 3).tolist()
     ([30.0, -12.0, 8.0], [1.05, 0.95, 1.0])
     """
-    pts = as_points(mag, name="mag")
-    if not np.isfinite(pts).all():
-        raise CalibrationError("mag readings must be finite (no NaN or inf)")
+    pts = as_samples(mag, "mag")
     n = len(pts)
+    if field is not None and not isinstance(field, ExpectedField):
+        raise CalibrationError(f"field must be an ExpectedField (from expected_field) or None, "
+                               f"got {type(field).__name__}")
+    horizontal = opt.optional_number(horizontal, "horizontal", ge=opt.MAGNITUDE[0],
+                                     le=opt.MAGNITUDE[1], hint="the field's horizontal part")
+    vertical = None if vertical is None else opt.magnitude(
+        vertical, "vertical", signed=True, hint="the field's vertical part, up positive")
     if n < 12:
         raise CalibrationError(f"only {n} readings: record at least one full turn (50+ "
                                "readings spread around the circle)")
@@ -298,7 +305,7 @@ def fit_yaw(
         up = np.tile([0.0, 0.0, 1.0], (n, 1))
         level_note = "the body's z axis is vertical (no accelerometer given): a level vehicle"
     else:
-        a = as_points(accel, name="accel")
+        a = as_samples(accel, "accel")
         if len(a) != n:
             raise CalibrationError(f"accel has {len(a)} readings and mag {n}: they must pair")
         na = np.linalg.norm(a, axis=1)

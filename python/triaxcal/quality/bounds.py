@@ -11,7 +11,9 @@ accepts too.
 from __future__ import annotations
 
 from types import MappingProxyType
+from typing import Any
 
+from .._checks import options as _options
 from .._core import BOUNDS as _CORE_BOUNDS
 from ..conventions.units import STANDARD_GRAVITY, UNITS
 from ..errors import CalibrationError
@@ -22,6 +24,7 @@ __all__ = [
     "ATTITUDE_MIN_SCATTER_GAIN",
     "ATTITUDE_TOLERANCE",
     "CORE",
+    "DIE_TEMPERATURE_C",
     "GYRO_SATURATION_COUNTS",
     "LOW_COVERAGE_PCT",
     "MAX_ACCEL_OFFSET_G",
@@ -46,6 +49,7 @@ __all__ = [
     "SAMPLE_RATE_HZ",
     "STRENGTH_TOLERANCE",
     "implausible_radius",
+    "sample_rate",
 ]
 
 #: The core's bounds (``rust/bounds.rs``) by name: ``MAX_AXIS_RATIO`` (largest ratio between
@@ -244,10 +248,36 @@ REST_WHITE_CORRELATION = -0.35
 #: bag, which turns about the vertical, where gravity stays put; 0.15 g otherwise).
 REST_FLOOR = MappingProxyType({"gyro": 0.01, "accel": 0.01 * STANDARD_GRAVITY})
 
-#: Sample rates (Hz) a noise log may have: no inertial sensor is read slower than one sample in
+#: Temperatures (degC) a sensor's die may report: from absolute zero to 1000 degC (MEMS parts
+#: are specified from -40 to 125 degC; anything past these is a wrong column or unit, and
+#: near the edge of a double it would overflow the temperature polynomials).
+DIE_TEMPERATURE_C = (-273.15, 1000.0)
+
+#: Sample rates (Hz) a recording may have: no inertial sensor is read slower than one sample in
 #: 1000 s or faster than 1 MHz. A rate outside is a typo (``--rate-hz 1e300``) or a t column
-#: in another unit, and its averaging times would overflow the noise model (tau^2, 1/tau^2).
+#: in another unit, and the durations and sums made from it would overflow (a noise model's
+#: tau^2 and 1/tau^2, a turn integrated over 1e-300 s steps).
 SAMPLE_RATE_HZ = (1e-3, 1e6)
+
+
+def sample_rate(rate_hz: Any, what: str = "rate_hz") -> float:
+    """``rate_hz`` as a float within :data:`SAMPLE_RATE_HZ` (every method that takes a sample
+    rate checks it here: a rate near the edge of a double, ``1e-300`` or ``1e300``, would
+    overflow the durations and sums made from it).
+
+    >>> sample_rate(100)
+    100.0
+    >>> sample_rate(1e300)
+    Traceback (most recent call last):
+    ...
+    triaxcal.CalibrationError: rate_hz must be a finite number in [0.001, 1e+06], got 1e+300 (a \
+sample rate in Hz: no inertial sensor is read slower than one sample in 1000 s or faster than \
+1 MHz)
+    """
+    lo, hi = SAMPLE_RATE_HZ
+    return _options.number(rate_hz, what, ge=lo, le=hi,
+                           hint="a sample rate in Hz: no inertial sensor is read slower than "
+                                f"one sample in {1 / lo:g} s or faster than {hi / 1e6:g} MHz")
 
 #: A session's time stamps (host time) may step back this far (s) when the host's clock is
 #: corrected (NTP slews and steps by milliseconds); a t column that goes back further is not

@@ -95,6 +95,7 @@ def plot_report(
             "the report figure needs matplotlib: pip install 'triaxcal[plot]' (or matplotlib)"
         )
     dots = opt.integer(dpi, "dpi", ge=20, le=600, hint="dots per inch of the PNG")
+    opt.path(path, "path")
     fig = report_figure(points, cal, report=report, sensor=sensor, title=title, dpi=dots)
     out = Path(path)
     fig.savefig(out, format="png", dpi=dots)

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import options as opt
-from .._checks.arrays import as_points
+from .._checks.arrays import as_points, as_samples
 from ..calibration.part import SensorCalibration
 from ..conventions.units import per_unit
 from ..errors import CalibrationError
@@ -316,7 +316,7 @@ def quality_report(
     -------
     QualityReport
     """
-    pts = as_points(points)
+    pts = as_samples(points, "points")
     part, fit = _resolve(cal)
     n = len(pts)
     _check_sensor(sensor)

@@ -11,8 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import options
 from ..calibration.part import SensorCalibration
+from ..conventions.names import SENSORS
 from ..conventions.units import per_unit
+from ..errors import CalibrationError
 
 __all__ = ["SUMMARY_METHODS", "SUMMARY_MODELS", "coefficient_table", "context_lines", "fit_lines",
            "printable",
@@ -47,6 +50,14 @@ def _num(v: float) -> str:
     return f"{v:.6g}" if 1e-3 <= abs(v) < 1e6 else f"{v:.5e}"
 
 
+def _stat(record: dict[str, Any], key: str, fmt: str) -> str:
+    """``record[key]`` formatted as a number, or ``?`` when the record has none there (a
+    file written by hand or by another version)."""
+    v = record.get(key)
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+    return format(v, fmt) if ok else "?"
+
+
 def coefficient_table(part: SensorCalibration, sensor: str) -> list[str]:
     """The part's coefficients as a table: offset, matrix, radius, units, and which way the
     matrix works.
@@ -64,6 +75,10 @@ def coefficient_table(part: SensorCalibration, sensor: str) -> list[str]:
                          0             0   6.10352e-05
       radius             1 g
     """
+    options.instance(part, SensorCalibration, "part", "a SensorCalibration")
+    if not isinstance(sensor, str):
+        raise CalibrationError(f"sensor must name the part ({', '.join(SENSORS)}), got "
+                               f"{sensor!r:.60}")
     rows = [
         f"{sensor} ({part.raw_unit} -> {part.unit}), model {part.model or '?'}: "
         "calibrated = (raw - offset) @ matrix.T",
@@ -256,14 +271,15 @@ def context_lines(part: SensorCalibration) -> list[str]:
         ang = rotation_angle_deg(al.rotation)
         lines.append(f"  alignment       into the {al.to} frame: {ang:.2f} deg ({mnt})")
         if "dip_deg" in st:
-            lines.append(f"                  dip {st['dip_deg']:.2f} deg; spread over "
-                         f"{st.get('n_fit', '?')} poses {st['dip_std_before_deg']:.3f} deg "
-                         f"before, {st['dip_std_after_deg']:.3f} deg after")
+            lines.append(f"                  dip {_stat(st, 'dip_deg', '.2f')} deg; spread over "
+                         f"{st.get('n_fit', '?')} poses {_stat(st, 'dip_std_before_deg', '.3f')} "
+                         f"deg before, {_stat(st, 'dip_std_after_deg', '.3f')} deg after")
         if st.get("heading_rms_est_deg") is not None:
-            lines.append(f"  heading check   {st['n_heldout']} held-out poses: dip spread "
-                         f"{st['dip_std_heldout_before_deg']:.3f} -> "
-                         f"{st['dip_std_heldout_after_deg']:.3f} deg; heading error about "
-                         f"{st['heading_rms_est_deg']:.2f} deg rms (from the dip residuals)")
+            lines.append(f"  heading check   {st.get('n_heldout', '?')} held-out poses: dip "
+                         f"spread {_stat(st, 'dip_std_heldout_before_deg', '.3f')} -> "
+                         f"{_stat(st, 'dip_std_heldout_after_deg', '.3f')} deg; heading error "
+                         f"about {_stat(st, 'heading_rms_est_deg', '.2f')} deg rms (from the dip "
+                         "residuals)")
     y = part.stats.get("yaw")
     if isinstance(y, dict) and "determined" in y:
         from ..methods.yaw import yaw_text

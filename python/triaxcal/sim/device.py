@@ -14,8 +14,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._checks.options import named, number
+from .._checks.options import seed as seed_of
 from ..errors import CalibrationError
 from ..io.protocol import encode_binary, encode_framed, encode_raw, encode_text
+from ..quality.bounds import sample_rate
 from .imu import SimIMU
 from .scripts import Script, globe_script
 
@@ -90,6 +93,12 @@ class SentFrame:
     polled: bool
     intact: bool
     reply_s: float | None = None
+
+
+#: Frames a second the simulated board may send (``rate_hz * speed``): at least one a second
+#: (the host gives up on a board silent for 3 s), at most a million (past what any serial link
+#: or the host's reader keeps up with; the sample counter would overflow near 1e308).
+FRAMES_PER_SECOND = (1.0, 1e6)
 
 
 class SimDevice:
@@ -172,8 +181,14 @@ class SimDevice:
             raise CalibrationError(f"SimDevice channels must be 10 or 7, got {channels}")
         if mode.encode() not in MODE_BYTES:
             raise CalibrationError(f"mode must be one of P, B, F, T, R, got {mode!r}")
-        if not (rate_hz > 0 and speed > 0):
-            raise CalibrationError("rate_hz and speed must be > 0")
+        rate_hz = sample_rate(rate_hz)
+        speed = number(speed, "speed", gt=0, hint="simulated seconds per real second")
+        lo, hi = FRAMES_PER_SECOND
+        if not lo <= rate_hz * speed <= hi:
+            raise CalibrationError(
+                f"{named('speed')}={speed:g} at {rate_hz:g} Hz sends {rate_hz * speed:.3g} frames "
+                f"a second: give a speed that sends {lo:g} to {hi:g} (a slower board sends "
+                "nothing the host can wait for, a faster one more than a serial link carries)")
         faults = faults or Faults()
         if faults.drop_where not in ("any", "structure"):
             raise CalibrationError("Faults.drop_where must be 'any' or 'structure'")
@@ -195,8 +210,8 @@ class SimDevice:
             if self.channels == 10
             else np.hstack([self._frames[:, :6], np.zeros((len(self._frames), 3), np.int32)])
         )
-        self._frng = np.random.default_rng([faults.seed, 0xFA17])
-        self._brng = np.random.default_rng([seed, 0xBAD])
+        self._frng = np.random.default_rng([seed_of(faults.seed, "faults.seed"), 0xFA17])
+        self._brng = np.random.default_rng([seed_of(seed), 0xBAD])
         self.sent: list[SentFrame] = []
         self.received = bytearray()
         self.motioncal: MotionCalPacket | None = None

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.options import seed as seed_of
 from ..conventions.rotations import euler_to_dcm
 from ..errors import CalibrationError
 from ..io.files import write_file
@@ -120,7 +121,7 @@ def simulate_flight(field_ned_mg: Any, *, duration_s: float = 600.0, rate_hz: fl
                                "100..1000 mG strong")
     if not (10 <= duration_s <= 36000 and 1 <= rate_hz <= 100):
         raise CalibrationError("duration 10..36000 s and rate 1..100 Hz")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed_of(seed))
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     yaw = (360.0 * t / 45.0 + 40.0 * np.sin(2 * np.pi * t / 97.0)) % 360.0
     roll = 25.0 * np.sin(2 * np.pi * t / 13.0) + 8.0 * np.sin(2 * np.pi * t / 5.3)

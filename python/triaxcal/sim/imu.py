@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.options import seed as seed_of
 from ..errors import CalibrationError
 from .scripts import Script
 from .truth import (
@@ -139,7 +140,7 @@ class SimIMU:
         temp_ref_c: float = 25.0,
         temp_noise: float = 5.0,
     ) -> None:
-        self.seed = int(seed)
+        self.seed = seed_of(seed)
         rng = np.random.default_rng([self.seed, 0x7E1A])
         if not field_ut > 0:
             raise CalibrationError(f"field_ut must be > 0 uT, got {field_ut}")

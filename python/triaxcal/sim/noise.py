@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._checks.options import seed as seed_of
 from ..errors import CalibrationError
 
 __all__ = ["NoiseTruth", "noise_chunks", "simulate_noise"]
@@ -98,7 +99,7 @@ def simulate_noise(
     ((100000, 3), 0.1)
     """
     _check(n, rate_hz, axes)
-    rng = np.random.default_rng([int(seed), 0x0A11A])
+    rng = np.random.default_rng([seed_of(seed), 0x0A11A])
     dt = 1.0 / rate_hz
     out = rng.normal(0.0, truth.white * math.sqrt(rate_hz), (n, axes))
     out += _bias(truth, axes)
@@ -141,7 +142,7 @@ def noise_chunks(
         )
     if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
         raise CalibrationError(f"chunk must be a whole number of rows >= 1, got {chunk!r}")
-    rng = np.random.default_rng([int(seed), 0x0A11A])
+    rng = np.random.default_rng([seed_of(seed), 0x0A11A])
     sd_white = truth.white * math.sqrt(rate_hz)
     sd_walk = truth.random_walk / math.sqrt(rate_hz)
     bias = _bias(truth, axes)

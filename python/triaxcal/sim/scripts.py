@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.options import seed as seed_of
 from ..errors import CalibrationError
 from .truth import _ro, matrix_to_rotvec, rotvec_to_matrix
 
@@ -187,7 +188,7 @@ def globe_script(
     """
     if latitudes < 2 or turns < 1:
         raise CalibrationError("globe_script needs latitudes >= 2 and turns >= 1")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed_of(seed))
     az = math.radians(azimuth_deg)
     poses, labels = [], []
     for i, phi_deg in enumerate(np.linspace(90.0, -90.0, latitudes)):
@@ -221,7 +222,7 @@ def tumble_script(n: int, *, seed: int = 0, hold_s: float = 0.5) -> Script:
     """
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise CalibrationError(f"tumble_script needs n >= 1 orientations, got {n!r}")
-    q = np.random.default_rng([seed, 7]).normal(size=(n, 4))
+    q = np.random.default_rng([seed_of(seed), 7]).normal(size=(n, 4))
     w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
     rot = np.stack([
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
@@ -243,7 +244,7 @@ def six_face_script(
 
     Each pose gets a random heading and a tilt of ``jitter_deg`` (rms).
     """
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed_of(seed))
     ups = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)]
     names = ["+Z up", "-Z up", "+X up", "-X up", "+Y up", "-Y up"]
     poses = []

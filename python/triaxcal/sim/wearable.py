@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks.options import seed as seed_of
 from ..errors import CalibrationError
 
 __all__ = ["FreeLivingSim", "WearableTruth"]
@@ -101,7 +102,7 @@ class FreeLivingSim:
     ) -> None:
         if not (days > 0 and rate_hz > 0 and 0 < still_fraction < 1):
             raise CalibrationError("days and rate_hz must be > 0, still_fraction in (0, 1)")
-        self.seed = int(seed)
+        self.seed = seed_of(seed)
         self.days = float(days)
         self.rate_hz = float(rate_hz)
         rng = np.random.default_rng([self.seed, 0xA0C])
