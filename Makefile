@@ -24,7 +24,7 @@ endif
 APT_PACKAGES := gcc python3-venv gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium \
                 chromium-driver valgrind gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
 
-.PHONY: deps install data test test-rust test-python lint stubs docs bench bench-instructions instructions-guard demo wheel wheel-check firmware-check
+.PHONY: deps install data test test-rust test-python lint stubs docs bench bench-speed bench-instructions instructions-guard demo wheel wheel-check firmware-check
 
 # Debian packages the tests need (a C compiler and venv for the build; the AVR firmware build,
 # its QEMU run, the Arduino sketch built against the Arduino AVR core; the firmware library's
@@ -97,12 +97,17 @@ test: deps install data test-rust lint docs test-python firmware-check instructi
 bench:
 	$(PY) benches/bench_fit.py
 
+# Every speed target against its strongest baseline; rewrites docs/benchmarks/results.md.
+bench-speed:
+	$(PY) benches/bench_speed.py --markdown docs/benchmarks/results.md
+
 # Instruction counts with valgrind (callgrind): per point per pass, per fit, per batch set.
 bench-instructions:
 	$(PY) benches/instructions.py
 
-# The regression guard: a fit of 10 points, a fixed 1e5-point fit and a fixed batch may not grow by more than 10 %
-# over benches/instructions.json (update it with `benches/instructions.py --update`).
+# The regression guard: a fit of 10 points, a fixed 1e5-point fit, a fixed batch, the Allan deviation and the two
+# log readers may not grow by more than 10 % over benches/instructions.json (update it with
+# `benches/instructions.py --update`).
 instructions-guard:
 	$(PY) benches/instructions.py --check
 

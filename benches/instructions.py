@@ -12,12 +12,18 @@
 - a Python ``fit_ellipsoid`` call of 10 points: its instructions, and what it adds to the
   compiled fit inside it (argument checks, the binding, the result object).
 
+- the Allan deviation of 1e6 rows x 3 axes (overlapping and not), and the log readers on a
+  simulated flight's ULog and DataFlash log: instructions per term, row or byte.
+
 ``--check`` is the regression guard of ``make test``: it counts a fit of 10 points (the fixed
-cost of a fit), a fixed 1e5-point fit, a fixed batch of 1,000 sets and what a Python call of
-10 points adds to its fit, and fails if any grew by more than 10 % over the figures in
-``benches/instructions.json`` (``--update`` rewrites them). The first three workloads are the
-Rust example ``benches/instructions.rs`` (deterministic data, one thread); the last runs the
-installed triaxcal under the Python running this script. The counts are those of the kernels
+cost of a fit), a fixed 1e5-point fit, a fixed batch of 1,000 sets, what a Python call of
+10 points adds to its fit, the Allan deviation of 1e5 rows x 3 axes (overlapping and not) and
+the two log readers on a simulated flight (:func:`triaxcal.sim.flight.write_flight`, 600 s at
+20 Hz, seed 7), and fails if any grew by more than 10 % over the figures in
+``benches/instructions.json`` (``--update`` rewrites them). The fits, the Allan deviation and
+the readers are the Rust example ``benches/instructions.rs`` (deterministic data, one
+thread); the Python call and the simulated logs come from the installed triaxcal under the
+Python running this script. The counts are those of the kernels
 this CPU runs (AVX2 + FMA, or the portable build), each with its own figures. Without
 valgrind the check is skipped with a message; everything else missing is an error.
 """
@@ -59,7 +65,7 @@ def kernels() -> str:
     return "avx2" if re.search(r"\bavx2\b", flags) and re.search(r"\bfma\b", flags) else "portable"
 
 
-def count(case: str, n: int, toggle: str, threads: int = 1) -> list[int]:
+def count(case: str, n: int | Path, toggle: str, threads: int = 1) -> list[int]:
     """Instructions executed inside ``toggle`` (and what it calls) for ``instructions case n``,
     one entry per thread that executed any."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -84,6 +90,28 @@ def count(case: str, n: int, toggle: str, threads: int = 1) -> list[int]:
 
 FIT = "triaxcal::ellipsoid::fit_ellipsoid"
 PASS = "triaxcal::ellipsoid::bench_one_pass"
+ALLAN = "triaxcal::allan::Allan::push"
+READERS = {"ulog": "triaxcal::logs::ulog::read", "dataflash": "triaxcal::logs::dataflash::read"}
+
+# the simulated flight whose logs the readers' counts read (deterministic: a fixed seed)
+FLIGHT_SCRIPT = """
+import sys
+from triaxcal.sim.flight import write_flight
+write_flight(sys.argv[1], [200.0, 10.0, 420.0], duration_s=600, rate_hz=20.0, seed=7)
+"""
+
+
+def flight_logs(tmp: str) -> dict[str, Path]:
+    """The simulated flight's logs, written into ``tmp``: {"ulog": .ulg, "dataflash": .BIN}."""
+    subprocess.run([sys.executable, "-c", FLIGHT_SCRIPT, tmp], check=True)
+    return {"ulog": Path(tmp) / "flight.ulg", "dataflash": Path(tmp) / "flight.BIN"}
+
+
+def reader_counts() -> dict[str, tuple[int, int]]:
+    """Instructions of each log reader on the simulated flight, with the log's size in bytes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return {kind: (sum(count(kind, path, READERS[kind])), path.stat().st_size)
+                for kind, path in flight_logs(tmp).items()}
 
 # `calls` Python calls of fit_ellipsoid on 10 points like those of benches/bench_fit.py's
 # overhead row, made by triaxcal._core.repeat_call, inside which callgrind counts. One call
@@ -139,11 +167,16 @@ def python_call(calls: int = 1000) -> tuple[int, int]:
 
 def measure_guard() -> dict[str, int]:
     whole, fit = python_call()
+    readers = reader_counts()
     return {
         "fit_10": sum(count("fit", 10, FIT)),
         "fit_1e5": sum(count("fit", 100_000, FIT)),
         "batch_1000": sum(count("batch", 1000, FIT)),
         "python_call_10_beyond_fit": whole - fit,
+        "allan_1e5": sum(count("allan", 100_000, ALLAN)),
+        "adev_1e5": sum(count("adev", 100_000, ALLAN)),
+        "ulog_flight": readers["ulog"][0],
+        "dataflash_flight": readers["dataflash"][0],
     }
 
 
@@ -174,6 +207,18 @@ def report() -> None:
         share = max(split) / sum(split)
         print(f"  with 2 threads: {sum(split) / sets:,.0f} per set, the busier thread does "
               f"{share:.1%} of the work: speed-up bound {1 / share:.2f}x")
+    rows = 1_000_000
+    ms = len([m for m in (1 << k for k in range(64)) if m <= (rows - 1) // 2])
+    terms = sum(3 * (rows - 2 * (1 << k)) for k in range(ms))
+    over = sum(count("allan", rows, ALLAN))
+    print(f"Allan deviation, 1e6 rows x 3 axes, {ms} octave taus, overlapping: {over / 1e6:.1f} M "
+          f"instructions, {over / terms:.2f} per term ({terms / 1e6:.1f} M terms)")
+    non = sum(count("adev", rows, ALLAN))
+    print(f"  non-overlapping: {non / 1e6:.1f} M instructions, {non / (3 * rows):.1f} per row "
+          "and axis")
+    for kind, (n, size) in reader_counts().items():
+        print(f"{kind} reader, simulated flight ({size / 1e6:.2f} MB): {n / 1e6:.1f} M "
+              f"instructions, {n / size:.1f} per byte")
 
 
 def check(update: bool) -> int:
@@ -186,6 +231,10 @@ def check(update: bool) -> int:
         print(f"wrote {FIGURES.relative_to(ROOT)} [{kind}]: {got}")
         return 0
     want = figures.get(kind)
+    if want is not None and not set(got) <= set(want):
+        print(f"no committed figures for {sorted(set(got) - set(want))} [{kind}] in "
+              f"{FIGURES.relative_to(ROOT)}: run `python benches/instructions.py --update`")
+        return 1
     if want is None:
         print(f"no committed instruction figures for the {kind} kernels in "
               f"{FIGURES.relative_to(ROOT)}: run `python benches/instructions.py --update`")

@@ -8,6 +8,10 @@
 //! instructions polish N       one polishing pass (Jᵀr and the noise sums, no JᵀJ)
 //! instructions last N         the last polishing pass (JᵀJ, noise sums and coverage)
 //! instructions descend N      descend_center (radius 16384, the seed's steps) of N points
+//! instructions allan N        overlapping Allan deviation of N rows x 3 axes, octave taus
+//! instructions adev N         non-overlapping Allan deviation of the same rows
+//! instructions ulog PATH      read a ULog, every topic decoded
+//! instructions dataflash PATH read a DataFlash log's MAG, ATT, BAT, IMU and PARM messages
 //! instructions none N         only generate the N points (subtract from the others)
 //! ```
 //!
@@ -70,11 +74,52 @@ fn points_of(n: usize, seed: u64, noise: f64, minv: [[f64; 3]; 3]) -> Vec<[f64; 
         .collect()
 }
 
+/// Rate readings at rest, 3 axes: a bias, white noise and a random walk (the data of
+/// `benches/bench_noise.py`).
+fn allan_rows(n: usize) -> Vec<f64> {
+    let mut rng = Rng(0x5eed);
+    let mut walk = [0.0; 3];
+    let mut rows = Vec::with_capacity(3 * n);
+    for _ in 0..n {
+        for w in walk.iter_mut() {
+            *w += 2e-4 * rng.normal();
+            rows.push(250.0 + 0.05 * rng.normal() + *w);
+        }
+    }
+    rows
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: instructions {fit|batch|pass|polish|last|descend|none} N";
+    let usage = "usage: instructions {fit|batch|pass|polish|last|descend|allan|adev|none} N, \
+                 or instructions {ulog|dataflash} PATH";
     let what = args.get(1).expect(usage).as_str();
-    let n: usize = args.get(2).expect(usage).parse().expect(usage);
+    let arg = args.get(2).expect(usage);
+    match what {
+        "ulog" => {
+            let log = triaxcal::logs::ulog::read(std::path::Path::new(arg), None).unwrap();
+            let rows: usize = log
+                .datasets
+                .iter()
+                .map(|d| d.fields.first().map_or(0, |(_, c)| c.len()))
+                .sum();
+            println!("ulog: {} topics, {rows} messages", log.datasets.len());
+            return;
+        }
+        "dataflash" => {
+            let types = ["MAG", "ATT", "BAT", "IMU", "PARM"];
+            let out = triaxcal::logs::dataflash::read(std::path::Path::new(arg), &types).unwrap();
+            match out {
+                triaxcal::logs::dataflash::Outcome::Read { messages, .. } => {
+                    println!("dataflash: {} message types", messages.len())
+                }
+                _ => panic!("the DataFlash reader fell back on {arg}"),
+            }
+            return;
+        }
+        _ => {}
+    }
+    let n: usize = arg.parse().expect(usage);
     let opts = FitOptions {
         model: Model::Full,
         radius: Some(1.0),
@@ -129,6 +174,23 @@ fn main() {
                 "descend {n}: centre {:?} after {} neighbourhoods",
                 d.center, d.iterations
             );
+        }
+        "allan" | "adev" => {
+            let rows = allan_rows(n);
+            let ms: Vec<u64> = (0..64)
+                .map(|k| 1u64 << k)
+                .take_while(|&m| m <= (n as u64 - 1) / 2)
+                .collect();
+            // one thread, so that no spinning worker adds a variable count
+            let mut acc = if what == "allan" {
+                triaxcal::allan::Allan::new(100.0, 3, &ms, None).unwrap()
+            } else {
+                triaxcal::allan::Allan::non_overlapping(100.0, 3, &ms).unwrap()
+            };
+            acc.set_parallel(false);
+            acc.push(&rows).unwrap();
+            let r = acc.result();
+            println!("{what} {n}: {} taus, adev[0] {:?}", r.taus.len(), r.adev[0]);
         }
         "none" => {
             let pts = points(n, 1, 164.0);

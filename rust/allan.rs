@@ -1,4 +1,4 @@
-//! Overlapping Allan deviation of rate samples, streamed chunk by chunk.
+//! Allan deviation (overlapping, and non-overlapping) of rate samples, streamed chunk by chunk.
 //!
 //! Noise model (IEEE Std 952 / 1554): a gyroscope (or accelerometer) at rest reports its rate
 //! `y_k` (deg/s, rad/s, m/s², counts...) every `τ0 = 1 / rate` seconds. With the phase
@@ -26,15 +26,35 @@
 //!   overlapping one (starts closer than `m / 2048` give nearly identical terms), while the
 //!   memory no longer grows with the cluster.
 //!
+//! The non-overlapping deviation (allantools' `adev`; [`Allan::non_overlapping`]) is the same
+//! sum with the starts `m` apart (`d = m`): a cluster then costs one term per `m` samples.
+//!
 //! Memory is fixed when the accumulator is made (a few MB per axis for clusters up to 2⁴⁰
 //! samples) and independent of the number of samples; the work per sample is one
-//! double-double addition plus a few operations per exact cluster size.
+//! double-double addition plus a few operations per exact cluster size. Rows are processed in
+//! batches: the phases of a batch are written straight into the ring of stride 1 (the other
+//! strides take every `d`-th of them), then each axis's new terms are summed in [`PARTS`]
+//! parts, each part through all the clusters in increasing size (the phases `2m` back that the
+//! cluster of `m` reads are the ones the cluster of `2m` reads `2m` back: still in cache);
+//! the parts run in parallel when there are many terms, and their sums are added in a fixed
+//! order, so that the result does not depend on the number of threads.
 
 use crate::error::{CalError, Result};
 
 /// Rows of a chunk processed together (phases are computed for a batch, then every cluster
 /// reads them as contiguous slices, which vectorises).
-const BATCH: usize = 4096;
+const BATCH: usize = 16_384;
+
+/// The terms of a batch are summed on several threads from this many on (fewer: the cost of
+/// waking the pool exceeds the gain).
+const PARALLEL_TERMS: u64 = 1 << 16;
+
+/// The new terms of a cluster in a batch: (level, cluster size in entries of the level,
+/// first and last entry).
+type Task = (usize, usize, u64, u64);
+
+/// The new terms of each axis are summed in this many parts (the units of parallel work).
+const PARTS: usize = 4;
 
 /// Terms summed side by side in the inner loop (two AVX2 registers).
 const LANES: usize = 8;
@@ -154,6 +174,7 @@ pub struct Allan {
     levels: Vec<Level>,
     axes: Vec<Axis>,
     n: u64,
+    parallel: bool,
 }
 
 /// The Allan deviation of everything pushed so far.
@@ -188,6 +209,40 @@ impl Allan {
             ));
         }
         let clusters = plan(ms, exact_up_to)?;
+        Allan::with_clusters(rate_hz, axes, clusters)
+    }
+
+    /// An accumulator of the non-overlapping Allan deviation (allantools' `adev`): each
+    /// cluster size `m` of `ms` starts its terms every `m` samples, so that consecutive
+    /// clusters do not overlap.
+    pub fn non_overlapping(rate_hz: f64, axes: usize, ms: &[u64]) -> Result<Allan> {
+        crate::error::check_positive("rate_hz", rate_hz)?;
+        let mut clusters = Vec::with_capacity(ms.len());
+        for &m in ms {
+            if m == 0 {
+                return Err(CalError::InvalidArgument(
+                    "cluster sizes must be at least 1 sample (tau >= 1 / rate_hz)".into(),
+                ));
+            }
+            clusters.push(Cluster { m, stride: m });
+        }
+        clusters.sort_by_key(|c| c.m);
+        clusters.dedup_by_key(|c| c.m);
+        Allan::with_clusters(rate_hz, axes, clusters)
+    }
+
+    fn with_clusters(rate_hz: f64, axes: usize, clusters: Vec<Cluster>) -> Result<Allan> {
+        crate::error::check_positive("rate_hz", rate_hz)?;
+        if axes == 0 || axes > 64 {
+            return Err(CalError::InvalidArgument(format!(
+                "axes must be between 1 and 64 channels, got {axes}"
+            )));
+        }
+        if clusters.is_empty() {
+            return Err(CalError::InvalidArgument(
+                "no cluster sizes asked for: give at least one tau".into(),
+            ));
+        }
         let mut levels: Vec<Level> = Vec::new();
         for (ci, c) in clusters.iter().enumerate() {
             let mp = c.m / c.stride;
@@ -242,6 +297,7 @@ impl Allan {
             levels,
             axes: vec![axis; axes],
             n: 0,
+            parallel: true,
         };
         // phase index 0 (x_0 = 0) belongs to every level
         for a in acc.axes.iter_mut() {
@@ -254,6 +310,12 @@ impl Allan {
             l.count = 1;
         }
         Ok(acc)
+    }
+
+    /// Whether large pushes sum their terms on several threads (rayon; the default). Off, the
+    /// work runs on the calling thread: for instruction counts.
+    pub fn set_parallel(&mut self, parallel: bool) {
+        self.parallel = parallel;
     }
 
     /// The clusters this accumulator computes.
@@ -305,38 +367,173 @@ impl Allan {
             )));
         }
         let rows = samples.len() / self.nax;
-        if rows == 0 {
-            return Ok(());
+        let mut start = 0usize;
+        while start < rows {
+            let b = BATCH.min(rows - start);
+            self.push_batch(samples, start, b);
+            start += b;
+            self.n += b as u64;
         }
-        let nax = self.nax;
-        let n0 = self.n;
-        let Allan { levels, axes, .. } = self;
-        // each axis is independent and advances its own copy of the level counters
-        let run_axis = |a: usize, ax: &mut Axis| {
-            if ax.reference.is_nan() {
-                ax.reference = samples[a];
-            }
-            let mut lv = levels.clone();
-            let mut start = 0usize;
-            while start < rows {
-                let b = BATCH.min(rows - start);
-                push_batch(ax, &mut lv, samples, nax, a, start, b, n0 + start as u64);
-                start += b;
-            }
-        };
-        if nax > 1 && rows >= 2 * BATCH {
-            use rayon::prelude::*;
-            axes.par_iter_mut()
-                .enumerate()
-                .for_each(|(a, ax)| run_axis(a, ax));
-        } else {
-            for (a, ax) in axes.iter_mut().enumerate() {
-                run_axis(a, ax);
-            }
-        }
-        advance_counts(levels, n0, rows as u64);
-        self.n += rows as u64;
         Ok(())
+    }
+
+    /// Rows `start..start + b` (all finite): their phases, appended to every level's ring,
+    /// then the new terms of every cluster and axis, in parallel when there are many.
+    fn push_batch(&mut self, samples: &[f64], start: usize, b: usize) {
+        let nax = self.nax;
+        let n_before = self.n;
+        let parallel = self.parallel;
+        let Allan { levels, axes, .. } = self;
+        // phases, a double-double running sum per axis (hi the plain sum, lo the exact sum of
+        // its rounding errors), written straight into the ring of stride 1 (or, without one,
+        // into the batch buffer); this batch holds phase indices k = n_before + 1 ..=
+        // n_before + b
+        let l1 = levels.iter().position(|l| l.stride == 1);
+        let levels_ro: &[Level] = levels;
+        let run_phases = |(a, ax): (usize, &mut Axis)| {
+            if ax.reference.is_nan() {
+                ax.reference = samples[start * nax + a];
+            }
+            let (r, mut hi, mut lo) = (ax.reference, ax.hi, ax.lo);
+            let col = &samples[start * nax + a..];
+            match l1 {
+                Some(li) => {
+                    let cap = levels_ro[li].cap;
+                    let p0 = (levels_ro[li].count % cap as u64) as usize;
+                    let first = b.min(cap - p0);
+                    let ring = &mut ax.rings[li];
+                    let (h, l) = (&mut ring.hi[p0..p0 + first], &mut ring.lo[p0..p0 + first]);
+                    phases(&mut hi, &mut lo, r, col, nax, h, l);
+                    let (h, l) = (&mut ring.hi[..b - first], &mut ring.lo[..b - first]);
+                    phases(
+                        &mut hi,
+                        &mut lo,
+                        r,
+                        col.get(first * nax..).unwrap_or(&[]),
+                        nax,
+                        h,
+                        l,
+                    );
+                }
+                None => phases(
+                    &mut hi,
+                    &mut lo,
+                    r,
+                    col,
+                    nax,
+                    &mut ax.bhi[..b],
+                    &mut ax.blo[..b],
+                ),
+            }
+            ax.hi = hi;
+            ax.lo = lo;
+        };
+        if parallel && nax > 1 && (b * nax) as u64 >= PARALLEL_TERMS {
+            use rayon::prelude::*;
+            axes.par_iter_mut().enumerate().for_each(run_phases);
+        } else {
+            axes.iter_mut().enumerate().for_each(run_phases);
+        }
+        // every level keeps the phases at multiples of its stride
+        let mut tasks: Vec<Task> = Vec::new();
+        let mut task_cluster: Vec<usize> = Vec::new();
+        let mut terms = 0u64;
+        for li in 0..levels.len() {
+            let d = levels[li].stride;
+            let k_first = (n_before + 1).div_ceil(d) * d;
+            let k_last = n_before + b as u64;
+            if k_first > k_last {
+                continue;
+            }
+            let e_first = levels[li].count;
+            let count = ((k_last - k_first) / d + 1) as usize;
+            if d > 1 {
+                let cap = levels[li].cap;
+                let p0 = (e_first % cap as u64) as usize;
+                for ax in axes.iter_mut() {
+                    match l1 {
+                        // the source: the ring of stride 1, whose entry k holds phase k
+                        Some(l) => {
+                            let c = levels[l].cap;
+                            let (src, dst) = if l < li {
+                                let (x, y) = ax.rings.split_at_mut(li);
+                                (&x[l], &mut y[0])
+                            } else {
+                                let (x, y) = ax.rings.split_at_mut(l);
+                                (&y[0], &mut x[li])
+                            };
+                            let q0 = (k_first % c as u64) as usize;
+                            gather(&src.hi, &src.lo, c, q0, d as usize, count, dst, cap, p0);
+                        }
+                        None => {
+                            let q0 = (k_first - n_before - 1) as usize;
+                            let ring = &mut ax.rings[li];
+                            gather(
+                                &ax.bhi,
+                                &ax.blo,
+                                usize::MAX,
+                                q0,
+                                d as usize,
+                                count,
+                                ring,
+                                cap,
+                                p0,
+                            );
+                        }
+                    }
+                }
+            }
+            let l = &mut levels[li];
+            let e_last = e_first + count as u64 - 1;
+            l.count = e_first + count as u64;
+            for &(ci, mp) in &l.clusters {
+                let lo_e = e_first.max(2 * mp as u64);
+                if lo_e > e_last {
+                    continue;
+                }
+                terms += e_last - lo_e + 1;
+                tasks.push((li, mp, lo_e, e_last));
+                task_cluster.push(ci);
+            }
+        }
+        // the terms: each axis's new entries in PARTS parts, each part through every cluster
+        // in order (a cluster of 2m reads the phases 2m back that the cluster of m has just
+        // read: they are still in cache), the parts in parallel when there are many terms;
+        // the partial sums are the same whichever thread makes them, and are added in order
+        let part_sums = |(a, part): (usize, usize)| -> Vec<f64> {
+            tasks
+                .iter()
+                .map(|&(li, mp, e0, e1)| {
+                    let n = e1 - e0 + 1;
+                    let lo = e0 + n * part as u64 / PARTS as u64;
+                    let hi = e0 + n * (part as u64 + 1) / PARTS as u64;
+                    if lo < hi {
+                        sum_terms(&axes[a].rings[li], levels[li].cap, mp, lo, hi - 1)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        };
+        let jobs: Vec<(usize, usize)> = (0..nax)
+            .flat_map(|a| (0..PARTS).map(move |p| (a, p)))
+            .collect();
+        let sums: Vec<Vec<f64>> = if parallel && terms * nax as u64 >= PARALLEL_TERMS {
+            use rayon::prelude::*;
+            jobs.par_iter().map(|&j| part_sums(j)).collect()
+        } else {
+            jobs.iter().map(|&j| part_sums(j)).collect()
+        };
+        for (k, &ci) in task_cluster.iter().enumerate() {
+            for (a, ax) in axes.iter_mut().enumerate() {
+                let s: f64 = (0..PARTS).map(|p| sums[a * PARTS + p][k]).sum();
+                // Kahan: the total over a whole log keeps full precision (true sum = sum - comp)
+                let yv = s - ax.comp[ci];
+                let t = ax.sum[ci] + yv;
+                ax.comp[ci] = (t - ax.sum[ci]) - yv;
+                ax.sum[ci] = t;
+            }
+        }
     }
 
     /// The Allan deviation of everything pushed so far.
@@ -377,75 +574,66 @@ impl Allan {
     }
 }
 
-/// The level counts after `rows` more samples following `n0` (phase indices n0+1 ..= n0+rows).
-fn advance_counts(levels: &mut [Level], n0: u64, rows: u64) {
-    for l in levels.iter_mut() {
-        l.count = (n0 + rows) / l.stride + 1;
+/// The double-double running phase (`hi` the plain sum, `lo` the exact sum of its rounding
+/// errors: TwoSum) over the readings `col[0], col[nax], col[2 nax]...` less `reference`,
+/// written to `dh` and `dl` (one per reading).
+#[inline(always)]
+fn phases(
+    hi: &mut f64,
+    lo: &mut f64,
+    reference: f64,
+    col: &[f64],
+    nax: usize,
+    dh: &mut [f64],
+    dl: &mut [f64],
+) {
+    let n = dh.len().min(dl.len());
+    let col = &col[..(n.max(1) - 1) * nax + usize::from(n > 0)];
+    let (mut h, mut l) = (*hi, *lo);
+    for i in 0..n {
+        let y = col[i * nax] - reference;
+        let s = h + y;
+        let bp = s - h;
+        l += (h - (s - bp)) + (y - bp);
+        h = s;
+        dh[i] = h;
+        dl[i] = l;
     }
+    *hi = h;
+    *lo = l;
 }
 
-/// Phases of rows `start..start+b` of axis `a`, appended to every level, and the new terms.
+/// Copies `count` entries, every `d`-th from position `q` of a source ring of `src_cap`
+/// entries, to consecutive positions from `p` of `dst` (a ring of `cap` entries), in runs
+/// that wrap around neither ring.
 #[allow(clippy::too_many_arguments)]
-fn push_batch(
-    ax: &mut Axis,
-    levels: &mut [Level],
-    samples: &[f64],
-    nax: usize,
-    a: usize,
-    start: usize,
-    b: usize,
-    n_before: u64,
+fn gather(
+    src_hi: &[f64],
+    src_lo: &[f64],
+    src_cap: usize,
+    mut q: usize,
+    d: usize,
+    mut count: usize,
+    dst: &mut Ring,
+    cap: usize,
+    mut p: usize,
 ) {
-    // double-double running phase: hi is the plain sum, lo the exact sum of its rounding errors
-    let (mut hi, mut lo) = (ax.hi, ax.lo);
-    let r = ax.reference;
-    for i in 0..b {
-        let y = samples[(start + i) * nax + a] - r;
-        let s = hi + y;
-        let bp = s - hi;
-        lo += (hi - (s - bp)) + (y - bp);
-        hi = s;
-        ax.bhi[i] = hi;
-        ax.blo[i] = lo;
-    }
-    ax.hi = hi;
-    ax.lo = lo;
-    // this batch holds phase indices k = n_before + 1 ..= n_before + b (buffer index k - n_before - 1)
-    for (li, l) in levels.iter_mut().enumerate() {
-        let d = l.stride;
-        let k_first = (n_before + 1).div_ceil(d) * d;
-        let k_last = n_before + b as u64;
-        if k_first > k_last {
-            continue;
+    while count > 0 {
+        let run = count
+            .min(cap - p)
+            .min((src_cap.min(src_hi.len()) - q).div_ceil(d));
+        let (dh, dl) = (&mut dst.hi[p..p + run], &mut dst.lo[p..p + run]);
+        let last = q + (run - 1) * d;
+        let (sh, sl) = (&src_hi[q..=last], &src_lo[q..=last]);
+        for i in 0..run {
+            dh[i] = sh[i * d];
+            dl[i] = sl[i * d];
         }
-        let ring = &mut ax.rings[li];
-        let e_first = l.count;
-        let count = ((k_last - k_first) / d + 1) as usize;
-        let mut p = (e_first % l.cap as u64) as usize;
-        let mut idx = (k_first - n_before - 1) as usize;
-        for _ in 0..count {
-            ring.hi[p] = ax.bhi[idx];
-            ring.lo[p] = ax.blo[idx];
-            idx += d as usize;
-            p += 1;
-            if p == l.cap {
-                p = 0;
-            }
-        }
-        let e = e_first + count as u64;
-        let e_last = e - 1;
-        l.count = e;
-        for &(ci, mp) in &l.clusters {
-            let lo_e = e_first.max(2 * mp as u64);
-            if lo_e > e_last {
-                continue;
-            }
-            let s = sum_terms(ring, l.cap, mp, lo_e, e_last);
-            // Kahan: the total over a whole log keeps full precision (true sum = sum - comp)
-            let yv = s - ax.comp[ci];
-            let t = ax.sum[ci] + yv;
-            ax.comp[ci] = (t - ax.sum[ci]) - yv;
-            ax.sum[ci] = t;
+        count -= run;
+        p = (p + run) % cap;
+        q += run * d;
+        if q >= src_cap {
+            q -= src_cap;
         }
     }
 }
@@ -520,6 +708,14 @@ fn run_impl(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f6
     acc.iter().sum::<f64>() + tail
 }
 
+/// Non-overlapping Allan deviation of samples held in memory (`rows × axes`, row-major), at
+/// the cluster sizes `ms` (allantools' `adev`).
+pub fn adev(samples: &[f64], axes: usize, rate_hz: f64, ms: &[u64]) -> Result<AllanResult> {
+    let mut acc = Allan::non_overlapping(rate_hz, axes, ms)?;
+    acc.push(samples)?;
+    Ok(acc.result())
+}
+
 /// Overlapping Allan deviation of samples held in memory (`rows × axes`, row-major): one
 /// accumulator, one push.
 pub fn oadev(
@@ -589,6 +785,45 @@ mod tests {
                     r.adev[ci][0]
                 );
                 assert!((r.taus[ci] - c.m as f64 / 10.0).abs() < 1e-15);
+            }
+        }
+    }
+
+    #[test]
+    fn many_batches_of_three_axes_match_the_formula() {
+        let n = 3 * BATCH + 123;
+        let cols: Vec<Vec<f64>> = (0..3).map(|k| lcg(n, 10 + k)).collect();
+        let rows: Vec<f64> = (0..n)
+            .flat_map(|i| [cols[0][i], cols[1][i], cols[2][i]])
+            .collect();
+        let ms = [1u64, 2, 5, 1024, 20_000];
+        for parallel in [false, true] {
+            let mut acc = Allan::new(10.0, 3, &ms, None).unwrap();
+            acc.set_parallel(parallel);
+            acc.push(&rows).unwrap();
+            let r = acc.result();
+            let mut na = Allan::non_overlapping(10.0, 3, &ms).unwrap();
+            na.set_parallel(parallel);
+            na.push(&rows[..3 * 1000]).unwrap();
+            na.push(&rows[3 * 1000..]).unwrap();
+            let rn = na.result();
+            for (ci, c) in r.clusters.iter().enumerate() {
+                for k in 0..3 {
+                    let (want, terms) = naive(&cols[k], c.m as usize, 1);
+                    assert_eq!(r.terms[ci], terms as u64);
+                    assert!(
+                        (r.adev[ci][k] - want).abs() <= 1e-12 * want,
+                        "m {} axis {k}",
+                        c.m
+                    );
+                    let (want, terms) = naive(&cols[k], c.m as usize, c.m as usize);
+                    assert_eq!(rn.terms[ci], terms as u64);
+                    assert!(
+                        (rn.adev[ci][k] - want).abs() <= 1e-12 * want,
+                        "adev m {}",
+                        c.m
+                    );
+                }
             }
         }
     }

@@ -24,13 +24,22 @@ pub fn fit_batch(sets: &[&[[f64; 3]]], opts: &FitOptions) -> Vec<Result<Ellipsoi
         diagnostics: false,
         ..*opts
     };
-    sets.par_iter()
-        .map(|s| {
-            std::panic::catch_unwind(|| fit_ellipsoid(s, &inner)).unwrap_or_else(|_| {
-                Err(CalError::InvalidArgument(
-                    "internal error while fitting this set (please report it with the data)".into(),
-                ))
-            })
+    let one = |s: &&[[f64; 3]]| {
+        std::panic::catch_unwind(|| fit_ellipsoid(s, &inner)).unwrap_or_else(|_| {
+            Err(CalError::InvalidArgument(
+                "internal error while fitting this set (please report it with the data)".into(),
+            ))
         })
-        .collect()
+    };
+    let points: usize = sets.iter().map(|s| s.len()).sum();
+    if points <= SEQUENTIAL_POINTS {
+        // a few sets: handing them to the thread pool and waiting for it costs more than
+        // fitting them on this thread
+        return sets.iter().map(one).collect();
+    }
+    sets.par_iter().map(one).collect()
 }
+
+/// Batches of at most this many points in all are fitted on the calling thread (a set of 200
+/// points takes about 5 us; waking the pool's threads and waiting for them, tens of us).
+pub const SEQUENTIAL_POINTS: usize = 4_000;

@@ -83,6 +83,85 @@ pub fn scan(points: &[[f64; 3]], parallel: bool) -> Result<Scan> {
     })
 }
 
+/// [`scan`] and, in the same pass (chunk by chunk, while each chunk is in cache), the points
+/// sorted into `K` lists by `pick`, whose bit `k` puts a point in list `k` (in their order):
+/// one read of the points where separate passes would read them again.
+pub fn scan_picking<const K: usize, F: Fn(&[f64; 3]) -> u32 + Sync>(
+    points: &[[f64; 3]],
+    parallel: bool,
+    pick: F,
+) -> Result<(Scan, [Vec<[f64; 3]>; K])> {
+    let p0 = points.first().copied().unwrap_or([0.0; 3]);
+    let sort = |c: &[[f64; 3]], lists: &mut [Vec<[f64; 3]>; K]| {
+        for p in c {
+            let bits = pick(p);
+            if bits != 0 {
+                for (k, list) in lists.iter_mut().enumerate() {
+                    if bits >> k & 1 == 1 {
+                        list.push(*p);
+                    }
+                }
+            }
+        }
+    };
+    type Sums = ([f64; 3], [f64; 6], f64, f64);
+    let add = |a: Sums, b: Sums| -> Sums {
+        let mut s1 = a.0;
+        let mut s2 = a.1;
+        for k in 0..3 {
+            s1[k] += b.0[k];
+        }
+        for k in 0..6 {
+            s2[k] += b.1[k];
+        }
+        (s1, s2, a.2.max(b.2), a.3 + b.3)
+    };
+    let mut lists: [Vec<[f64; 3]>; K] = std::array::from_fn(|_| Vec::new());
+    let (s1, s2, max_abs, probe) = if parallel && points.len() > 4 * SCAN_CHUNK {
+        let parts: Vec<(Sums, [Vec<[f64; 3]>; K])> = points
+            .par_chunks(SCAN_CHUNK)
+            .map(|c| {
+                let mut l: [Vec<[f64; 3]>; K] = std::array::from_fn(|_| Vec::new());
+                sort(c, &mut l);
+                (scan_part(c, p0), l)
+            })
+            .collect();
+        // the lists at their final size at once (growing them by doubling would hold up to
+        // three times the points while copying)
+        for (k, list) in lists.iter_mut().enumerate() {
+            list.reserve_exact(parts.iter().map(|(_, l)| l[k].len()).sum());
+        }
+        let mut total = ([0.0; 3], [0.0; 6], 0.0, 0.0);
+        for (sums, l) in parts {
+            total = add(total, sums);
+            for (x, y) in lists.iter_mut().zip(l) {
+                x.extend_from_slice(&y);
+            }
+        }
+        total
+    } else {
+        let mut total = ([0.0; 3], [0.0; 6], 0.0, 0.0);
+        for c in points.chunks(SCAN_CHUNK) {
+            total = add(total, scan_part(c, p0));
+            sort(c, &mut lists);
+        }
+        total
+    };
+    if !probe.is_finite() {
+        check_finite(points)?;
+    }
+    Ok((
+        Scan {
+            p0,
+            n: points.len(),
+            s1,
+            s2,
+            max_abs,
+        },
+        lists,
+    ))
+}
+
 /// Moments about `p0`, the largest magnitude, and a probe that is finite exactly when every
 /// coordinate is (a NaN or an infinity makes the sums non-finite; so can an overflow, which
 /// the caller tells apart with [`check_finite`]).

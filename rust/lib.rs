@@ -23,6 +23,7 @@ pub mod error;
 pub mod geometry;
 mod kernel;
 mod linalg;
+pub mod logs;
 mod simd;
 pub mod sphere;
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import struct
 import tracemalloc
 from pathlib import Path
@@ -202,20 +203,17 @@ def test_dataflash_corpus_reads_or_refuses(dataflash_corpus):
     run_corpus("log", dataflash_corpus, timeout=150, max_rss_mb=900)
 
 
-@pytest.mark.xfail(strict=True, raises=(KeyError, OverflowError),
-                   reason="io/logs/dataflash.py (being ported to Rust): a FMT record's column "
-                   "renamed is a KeyError, a TimeUS past 2**63 an OverflowError")
-@pytest.mark.parametrize("edit", [{1376: 151}, {100_003 + 10: 0x9D}],
+@pytest.mark.parametrize(("edit", "says"), [({1376: 151}, "no field MagY"),
+                                             ({100_003 + 10: 0x9D}, "TimeUS beyond 2^63")],
                          ids=["fmt-renamed", "time-huge"])
-def test_dataflash_known_failures(realdata, tmp_path, edit):
+def test_dataflash_damaged_format_or_time_refused(realdata, tmp_path, edit, says):
     """Byte 1376 is in the MAG format's column names ("MagY" becomes "Ma\x97Y"); byte
-    100,013 the top byte of an IMU message's TimeUS (a uint64)."""
+    100,013 the top byte of an IMU message's TimeUS (a uint64). Both are refused with a
+    CalibrationError naming the damage (they were a KeyError and an OverflowError)."""
     p = tmp_path / "x.bin"
     p.write_bytes(changed(_dataflash_prefix(realdata), edit))
-    try:
+    with pytest.raises(tc.CalibrationError, match=re.escape(says)):
         tc.read_log(p)
-    except tc.CalibrationError:
-        pass
 
 
 # --------------------------------------------------------------------------------------------

@@ -88,6 +88,25 @@ def test_long_clusters_are_strided_and_equal_to_allantools_with_that_stride():
     np.testing.assert_allclose(ad.adev[ok], full.adev[ok], rtol=0.03)
 
 
+def test_non_overlapping_core_equals_allantools_adev_in_any_chunking():
+    """The core's non-overlapping mode (terms m samples apart) is allantools' ``adev``."""
+    from triaxcal import _core
+
+    y = _data(n=70_000, seed=6)
+    ms = [1, 2, 3, 8, 100, 1024, 10_000]
+    for chunk in (len(y), 9_999, 777):
+        acc = _core.AllanStream(RATE, 3, ms, exact_up_to=None, overlapping=False)
+        for i in range(0, len(y), chunk):
+            acc.push(np.ascontiguousarray(y[i:i + chunk]))
+        d = acc.result()
+        np.testing.assert_array_equal(d["stride"], d["m"])
+        for k in range(3):
+            t, ref, _, ns = allantools.adev(y[:, k], rate=RATE, data_type="freq",
+                                            taus=np.array(ms) / RATE)
+            np.testing.assert_array_equal(d["terms"], ns)
+            np.testing.assert_allclose(d["adev"][:, k], ref, rtol=1e-11)
+
+
 def test_real_recording_at_rest_equals_allantools(realdata):
     """The first 45 s of the imu_tk Xsens recording are at rest (raw ADC counts, 100 Hz)."""
     from _realdata import load_imutk_xsens

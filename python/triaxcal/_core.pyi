@@ -20,6 +20,8 @@ __all__ = [
     "fit_batch",
     "apply",
     "AllanStream",
+    "read_ulog",
+    "read_dataflash",
 ]
 
 __version__: str
@@ -79,7 +81,13 @@ def apply(
 @final
 class AllanStream:
     def __new__(
-        cls, rate_hz: float, axes: int, ms: list[int], *, exact_up_to: int | None
+        cls,
+        rate_hz: float,
+        axes: int,
+        ms: list[int],
+        *,
+        exact_up_to: int | None,
+        overlapping: bool = True,
     ) -> AllanStream: ...
     def push(self, chunk: npt.NDArray[np.float64]) -> None: ...
     @property
@@ -87,3 +95,6 @@ class AllanStream:
     @property
     def memory_bytes(self) -> int: ...
     def result(self) -> dict[str, Any]: ...
+
+def read_ulog(path: str, topics: list[str] | None = None) -> dict[str, Any]: ...
+def read_dataflash(path: str, types: list[str]) -> dict[str, Any]: ...

@@ -39,12 +39,17 @@
 //! Large inputs are solved first on a subsample of [`SUBSAMPLE_SIZE`] points, taken by a hash
 //! of each point's coordinates (so that neither the order nor a period of the data can make it
 //! unrepresentative; data with few distinct values fall back to one point at a fixed
-//! pseudo-random place in each of that many equal blocks), then polished on all points by
-//! Gauss-Newton steps that reuse the subsample's `JᵀJ` (scaled to the full size) and need only
-//! `Jᵀr` from each pass; the last pass accumulates the full `JᵀJ` for the standard errors, the
-//! residual statistics and the coverage of the sphere. The answer is the minimum over all
-//! points, so it does not depend on their order beyond round-off (passes that stop contracting
-//! fall back to Levenberg-Marquardt on all points).
+//! pseudo-random place in each of that many equal blocks), picked in the same pass that checks
+//! the points and takes their moments. From the subsample's solution, inputs of 400,000 points
+//! and more take one pass over all points (`JᵀJ`, `Jᵀr`) and a Newton step whose curvature
+//! term comes from a larger sample taken by the same hash (`refine::polish_once`): when that
+//! step can be shown to leave less than `tol` of the cost, the fit has read the points twice
+//! in all. Otherwise, and for smaller inputs, Gauss-Newton passes polish on all points, reusing
+//! the `JᵀJ` at hand and summing only `Jᵀr` until the last pass, which accumulates the full
+//! `JᵀJ` for the standard errors and the residual statistics (the coverage of the sphere comes
+//! from the subsample). The answer is the minimum over all points, so it does not depend on
+//! their order beyond round-off (passes that stop contracting fall back to Levenberg-Marquardt
+//! on all points).
 //!
 //! Noise biases every length-based fit by O(σ²) (σ² the variance of raw noise per axis): a
 //! noisy vector is longer on average, `E‖W(p - offset)‖ ≈ R + σ²(tr W² - ûᵀW²û)/(2R)`, and
@@ -66,7 +71,6 @@ use crate::geometry::{self, Spread};
 use crate::kernel::{self, Setup, Sums, Want};
 use crate::linalg;
 use nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
-use rayon::prelude::*;
 
 mod finish;
 mod refine;
@@ -75,7 +79,7 @@ mod subsample;
 mod tests;
 
 use finish::finish;
-use refine::{polish, refine};
+use refine::{polish, polish_once, refine, PolishStart};
 use subsample::subsample;
 
 /// Inputs with more points than this are first solved on a subsample.
@@ -83,6 +87,15 @@ pub const SUBSAMPLE_ABOVE: usize = 60_000;
 /// Size of that subsample: between these, `n / 25` (a larger subsample makes its solution and
 /// its `JᵀJ` closer to the full data's, so that fewer passes over all points polish it).
 pub const SUBSAMPLE_SIZE: (usize, usize) = (20_000, 40_000);
+/// The curvature sample of the one-pass polish (`refine::polish_once`) is this many times the
+/// subsample, up to [`CURVATURE_MAX`] points, taken the same way; inputs of fewer than
+/// [`CURVATURE_SHARE`] times its size are polished by Gauss-Newton passes instead (for them
+/// the sample would cost as much as a pass).
+const CURVATURE_TIMES: usize = 5;
+/// Most points of the curvature sample.
+const CURVATURE_MAX: usize = 200_000;
+/// See [`CURVATURE_TIMES`].
+const CURVATURE_SHARE: usize = 4;
 /// Most polishing passes over all points before falling back to Levenberg-Marquardt.
 const MAX_POLISH: usize = 8;
 
@@ -466,7 +479,34 @@ pub fn fit_ellipsoid(points: &[[f64; 3]], opts: &FitOptions) -> Result<Ellipsoid
             model.label()
         )));
     }
-    let scan = geometry::scan(points, opts.parallel)?;
+    // a large input is subsampled; the points of the subsample (and of the curvature sample,
+    // a superset taken by the same hash) are picked in the same pass as the moments: one read
+    // of the points, not two
+    let n = points.len();
+    let sample_size = (n / 25).clamp(SUBSAMPLE_SIZE.0, SUBSAMPLE_SIZE.1);
+    let curv_size = (CURVATURE_TIMES * sample_size).min(CURVATURE_MAX);
+    let one_pass = CURVATURE_SHARE * curv_size <= n;
+    let (scan, picked) = if n > SUBSAMPLE_ABOVE && opts.method != Method::Algebraic {
+        // lists: the subsample, and the two halves of the curvature sample (by the hash's
+        // last bit)
+        let cut = subsample::hash_cut(sample_size, n);
+        let curv_cut = if one_pass {
+            subsample::hash_cut(curv_size, n)
+        } else {
+            0
+        };
+        let any = cut.max(curv_cut);
+        let (scan, lists) = geometry::scan_picking::<3, _>(points, opts.parallel, |p| {
+            let h = subsample::point_hash(p);
+            if h >= any {
+                return 0; // most points
+            }
+            u32::from(h < cut) | if h < curv_cut { 2 << (h & 1) } else { 0 }
+        })?;
+        (scan, Some(lists))
+    } else {
+        (geometry::scan(points, opts.parallel)?, None)
+    };
     if geometry::needs_rescale(scan.max_abs) {
         return fit_rescaled(points, opts, scan.max_abs);
     }
@@ -486,10 +526,17 @@ pub fn fit_ellipsoid(points: &[[f64; 3]], opts: &FitOptions) -> Result<Ellipsoid
         });
     }
     let sp = geometry::classify(&scan, points.len(), model.label())?;
+    let work = picked.map(|[sub, half0, half1]| {
+        let (sub, by_hash) = subsample(points, sample_size, sub);
+        Samples {
+            sub,
+            curv: (one_pass && by_hash).then_some((half0, half1)),
+        }
+    });
     match model {
-        Model::Sphere => fit_generic::<4>(points, &sp, opts, nfree),
-        Model::Axis => fit_generic::<6>(points, &sp, opts, nfree),
-        Model::Full => fit_generic::<9>(points, &sp, opts, nfree),
+        Model::Sphere => fit_generic::<4>(points, work, &sp, opts, nfree),
+        Model::Axis => fit_generic::<6>(points, work, &sp, opts, nfree),
+        Model::Full => fit_generic::<9>(points, work, &sp, opts, nfree),
     }
 }
 
@@ -568,8 +615,18 @@ fn not_determined(model: Model, detail: &str) -> CalError {
     }
 }
 
+/// The samples of a large input: the subsample it is solved on first and, when it is polished
+/// in one pass, the curvature sample (see `refine::polish_once`).
+struct Samples {
+    sub: Vec<[f64; 3]>,
+    /// The curvature sample in two halves (by a bit of the hash).
+    curv: Option<(Vec<[f64; 3]>, Vec<[f64; 3]>)>,
+}
+
+/// The fit proper; `sample`: the samples of a large input (None: fit all points directly).
 fn fit_generic<const P: usize>(
     points: &[[f64; 3]],
+    sample: Option<Samples>,
     sp: &Spread,
     opts: &FitOptions,
     nfree: usize,
@@ -594,18 +651,9 @@ fn fit_generic<const P: usize>(
             free[i] = false;
         }
     }
-    let subsampled = n > SUBSAMPLE_ABOVE && opts.method != Method::Algebraic;
-    let store;
-    let work: &[[f64; 3]] = if subsampled {
-        store = subsample(
-            points,
-            (n / 25).clamp(SUBSAMPLE_SIZE.0, SUBSAMPLE_SIZE.1),
-            opts.parallel,
-        );
-        &store
-    } else {
-        points
-    };
+    let subsampled = sample.is_some();
+    let (store, curv) = sample.map_or((Vec::new(), None), |s| (s.sub, s.curv));
+    let work: &[[f64; 3]] = if subsampled { &store } else { points };
 
     // starting point
     let sphere = model == Model::Sphere;
@@ -656,9 +704,41 @@ fn fit_generic<const P: usize>(
         let (r, acc, h) = refine::<P>(work, norm, th0, opts, noise, &free, opts.max_iter);
         let iterations = r.iterations;
         if subsampled {
-            let left = opts.max_iter.saturating_sub(iterations);
-            let jtj = full_matrix(&acc.jtj) * (n as f64 / work.len() as f64);
-            match polish::<P>(points, work.len(), norm, r.th, jtj, opts, &free, left) {
+            // one pass over all points with a Newton step, or, when that step cannot be
+            // taken as converged, Gauss-Newton passes on from it
+            let once = match &curv {
+                Some((c0, c1)) if opts.max_iter > iterations => {
+                    polish_once::<P>(points, [c0, c1], norm, r.th, opts, &free)
+                }
+                _ => Err(None),
+            };
+            let polished = match once {
+                Ok(f) => Ok(f),
+                Err(Some(u)) => {
+                    let left = opts.max_iter.saturating_sub(iterations + 1);
+                    let start = PolishStart {
+                        rho2: u.rho2,
+                        heavy: true,
+                        prev: Some(u.prev),
+                    };
+                    polish::<P>(points, norm, u.th, u.jtj, opts, &free, left, start).map(|mut f| {
+                        f.iterations += 1;
+                        f
+                    })
+                }
+                Err(None) => {
+                    let left = opts.max_iter.saturating_sub(iterations);
+                    let jtj = full_matrix(&acc.jtj) * (n as f64 / work.len() as f64);
+                    // (about 10 / subsample size when the subsample's JᵀJ stands in for all)
+                    let start = PolishStart {
+                        rho2: 10.0 / work.len() as f64,
+                        heavy: false,
+                        prev: None,
+                    };
+                    polish::<P>(points, norm, r.th, jtj, opts, &free, left, start)
+                }
+            };
+            match polished {
                 Ok(mut f) => {
                     f.iterations += iterations;
                     f

@@ -152,24 +152,195 @@ pub(super) fn refine<const P: usize>(
     )
 }
 
-/// Gauss-Newton on all points from the subsample's solution `th`, with the subsample's `JᵀJ`
-/// scaled to the full size (`jtj`); see the module documentation. `None` when the passes do
-/// not contract (the caller then runs Levenberg-Marquardt on all points).
+/// How [`polish`] starts: its guess of the contraction `rho2` (the factor by which each step
+/// shrinks the next one's predicted decrease), and whether its first pass sums `JᵀJ`.
+pub(super) struct PolishStart {
+    pub rho2: f64,
+    pub heavy: bool,
+    /// (h, cost, predicted decrease, f) of the step that led to the start, to be checked.
+    pub prev: Option<(f64, f64, f64, f64)>,
+}
+
+/// Safety factor on the sampling error of the curvature that [`polish_once`] measures (from
+/// the disagreement of the two halves of its sample).
+const CURVATURE_SAMPLING: f64 = 4.0;
+
+/// The squared relative error of a [`polish_once`] step that grows with the noise (the terms of
+/// higher order it leaves out), as this times σ⁴ (σ the RMS residual relative to the radius;
+/// measured: below 0.01 σ⁴ up to 10 % noise).
+const CURVATURE_NONLINEAR: f64 = 0.05;
+
+/// What [`polish_once`] leaves when its step cannot be taken as converged: the parameters after
+/// it, the `JᵀJ` of all points at the start of the step, and the expected contraction.
+pub(super) struct Unfinished<const P: usize> {
+    pub th: [f64; P],
+    pub jtj: SMatrix<f64, P, P>,
+    pub rho2: f64,
+    /// (h, cost, predicted decrease, f) of the step, for the next pass to check.
+    pub prev: (f64, f64, f64, f64),
+}
+
+/// One pass over all points, at the subsample's solution `th`: `JᵀJ`, `Jᵀr`, the cost and the
+/// noise level of all points, and a Newton step from them. Its Hessian is `JᵀJ` plus the
+/// residuals' curvature `S = Σ r ∇²r` (what Gauss-Newton leaves out, and what makes a
+/// Gauss-Newton step from the subsample's solution fall short by up to a few hundredths of a
+/// standard error), taken along the step from `curv`, a larger sample of `m` points taken by
+/// the same hash, in two halves: `S v ≈ (n / m)(g_m(θ + v) - g_m(θ) - J_mᵀJ_m v)`, the change
+/// of the sample's gradient along `v` less its own `JᵀJ` part, and likewise the change of the
+/// noise term, which follows the residuals (its `Δh` moves the gradient by `-Jᵀc Δh`). Two
+/// terms of the Newton series `δ - H⁻¹Sδ + (H⁻¹S)²δ` (`δ` the Gauss-Newton step; three passes
+/// over the sample, 200,000 points at most, in cache after the first). The step is converged
+/// when what it leaves is below `tol` of the cost, as predicted from: the rest of the series
+/// (from the ratio of its two terms), the sampling error of `S` (from how much the two halves
+/// disagree) and the terms of higher order in the noise (`CURVATURE_NONLINEAR σ⁴`). Then the
+/// fit has read all points once, and the sample once more. Otherwise [`polish`] goes on from
+/// there (and checks that the step lowered the cost as predicted).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn polish_once<const P: usize>(
+    points: &[[f64; 3]],
+    curv: [&[[f64; 3]]; 2],
+    norm: Norm,
+    th: [f64; P],
+    opts: &FitOptions,
+    free: &[bool; P],
+) -> std::result::Result<Final<P>, Option<Unfinished<P>>> {
+    let n = points.len();
+    let want = Want {
+        jtj: true,
+        debias: opts.debias,
+        coverage: false, // from the subsample: see `finish`
+    };
+    let a = kernel::pass::<P>(points, &setup(norm, &th), want, opts.parallel);
+    let h = if opts.debias { noise_term(&a, n) } else { 0.0 };
+    let hess = full_matrix(&a.jtj);
+    let g = a.jtr(h);
+    let cost = a.cost(h);
+    let Some(d_gn) = solve(&hess, &g, 0.0, free) else {
+        return Err(None);
+    };
+    let dhd = d_gn.dot(&(hess * d_gn)).max(0.0);
+    let f0 = dhd / cost.max(1e-300);
+    if !f0.is_finite() {
+        return Err(None);
+    }
+    let mut step = d_gn;
+    let mut kappa2 = 0.0; // what the Newton series leaves, relative to f0
+    let mut sampled = 0.0; // the sampling error of the curvature, relative to f0
+    if f0 > opts.tol {
+        // each half of the curvature sample at the start, along the Gauss-Newton step and
+        // along its correction
+        let at = |half: &[[f64; 3]], t: &[f64; P], jtj: bool| {
+            let w = Want {
+                jtj,
+                debias: opts.debias,
+                coverage: false,
+            };
+            kernel::pass::<P>(half, &setup(norm, t), w, opts.parallel)
+        };
+        let jtc = SVector::<f64, P>::from(a.jtc);
+        let start: Vec<_> = curv.iter().map(|half| at(half, &th, true)).collect();
+        // S v from one half's gradient at th + v (its own JᵀJ part taken off), scaled to all
+        // points; the noise term follows the residuals: g = Jᵀr₀ - h Jᵀc moves by -Jᵀc Δh
+        let curvature = |k: usize, v: &SVector<f64, P>| -> SVector<f64, P> {
+            let (half, b0) = (curv[k], &start[k]);
+            let mut t = th;
+            for i in 0..P {
+                t[i] += v[i];
+            }
+            let b = at(half, &t, false);
+            let mut sv = (SVector::<f64, P>::from(b.jtr(h))
+                - SVector::<f64, P>::from(b0.jtr(h))
+                - full_matrix(&b0.jtj) * v)
+                * (n as f64 / half.len() as f64);
+            if h != 0.0 {
+                sv -= jtc * (half_sigma2(&b) - half_sigma2(b0));
+            }
+            sv
+        };
+        let m = (curv[0].len() + curv[1].len()) as f64;
+        let w = [curv[0].len() as f64 / m, curv[1].len() as f64 / m];
+        let both = |v: &SVector<f64, P>| -> (SVector<f64, P>, SVector<f64, P>) {
+            let (sa, sb) = (curvature(0, v), curvature(1, v));
+            (sa * w[0] + sb * w[1], sa - sb)
+        };
+        // solve() returns -H⁻¹ rhs: the Newton step is δ - H⁻¹ S δ + (H⁻¹ S)² δ - ...; two
+        // terms of it, and the ratio of the second to the first bounds the rest
+        let (s1, diff) = both(&d_gn);
+        let Some(c1) = solve(&hess, &s1.into(), 0.0, free) else {
+            return Err(None);
+        };
+        let Some(c2) = solve(&hess, &both(&c1).0.into(), 0.0, free) else {
+            return Err(None);
+        };
+        // the halves' disagreement about the first term measures the sampling error of the
+        // whole sample's (half their difference, for independent halves of equal size)
+        let Some(e1) = solve(&hess, &diff.into(), 0.0, free) else {
+            return Err(None);
+        };
+        step += c1 + c2;
+        let n1 = c1.dot(&(hess * c1)).max(0.0);
+        let n2 = c2.dot(&(hess * c2)).max(0.0);
+        let rho2 = n2 / n1.max(1e-300);
+        // what the series leaves after two terms, relative to the first step's decrease:
+        // (|c2| ρ / (1 - ρ))² with ρ = |c2| / |c1| (the H norm)
+        kappa2 = if rho2 < 0.25 {
+            (n2 / dhd.max(1e-300)) * rho2 / (1.0 - rho2.sqrt()).powi(2)
+        } else {
+            f64::INFINITY
+        };
+        sampled = 0.25 * e1.dot(&(hess * e1)).max(0.0) / dhd.max(1e-300);
+    }
+    let mut next = th;
+    for i in 0..P {
+        next[i] += step[i];
+    }
+    let sigma2 = cost / n as f64;
+    let sampling = CURVATURE_SAMPLING * sampled + CURVATURE_NONLINEAR * sigma2 * sigma2;
+    let left = f0 * (kappa2 + sampling);
+    let gv = SVector::<f64, P>::from(g);
+    if !(left <= opts.tol) || !kappa2.is_finite() {
+        let decrease = (-gv.dot(&step)).max(0.0);
+        return Err(Some(Unfinished {
+            th: next,
+            jtj: hess,
+            rho2: (kappa2 + sampling).clamp(1e-8, 0.25),
+            prev: (h, cost, decrease, f0),
+        }));
+    }
+    let jtr0 = SVector::<f64, P>::from(a.jtr0);
+    let shs = step.dot(&(hess * step)).max(0.0);
+    // the cost and the plain cost at the new parameters, from the quadratic models
+    let cost_after = (cost + gv.dot(&step)).max(0.0);
+    let plain = (a.r0r0 + 2.0 * step.dot(&jtr0) + shs).max(0.0);
+    Ok(Final {
+        th: next,
+        sums: a,
+        cost: cost_after,
+        plain,
+        iterations: 1,
+        converged: true,
+        coverage: false,
+    })
+}
+
+/// Gauss-Newton on all points from `th`, with `jtj` standing in for all points' `JᵀJ` until
+/// a pass sums it (the subsample's scaled to the full size, or that of [`polish_once`]); see
+/// the module documentation. `None` when the passes do not contract (the caller then runs
+/// Levenberg-Marquardt on all points).
 pub(super) fn polish<const P: usize>(
     points: &[[f64; 3]],
-    n_work: usize,
     norm: Norm,
     mut th: [f64; P],
     mut jtj: SMatrix<f64, P, P>,
     opts: &FitOptions,
     free: &[bool; P],
     max_iter: usize,
+    start: PolishStart,
 ) -> std::result::Result<Final<P>, [f64; P]> {
-    // ρ²: how much each step shrinks the next one's predicted decrease (guessed until seen:
-    // about 10 / subsample size when the subsample's JᵀJ stands in for the full one)
-    let mut rho2 = 10.0 / n_work as f64;
-    let mut heavy = false;
-    let mut prev: Option<(f64, f64, f64, f64)> = None; // (h, cost, predicted decrease, f) of the last pass
+    // ρ²: how much each step shrinks the next one's predicted decrease (guessed until seen)
+    let mut rho2 = start.rho2;
+    let mut heavy = start.heavy;
+    let mut prev: Option<(f64, f64, f64, f64)> = start.prev; // (h, cost, predicted decrease, f) of the last pass
     for k in 0..MAX_POLISH.min(max_iter.max(1)) {
         let last_chance = k + 1 >= MAX_POLISH.min(max_iter.max(1));
         heavy |= last_chance;

@@ -1,42 +1,37 @@
-//! The subsample a large input is solved on first: it depends on the set of points, not on
-//! their order.
+//! The subsample a large input is solved on first, and the larger curvature sample of
+//! [`super::refine::polish_once`]: they depend on the set of points, not on their order.
 
-use super::*;
+/// The hash below which a point is taken into a subsample of about `size` of `n` points.
+pub(super) fn hash_cut(size: usize, n: usize) -> u64 {
+    ((size as f64 / n as f64) * 18_446_744_073_709_551_616.0) as u64
+}
 
 /// A subsample of about `size` points that depends only on the *set* of points, not on their
-/// order: a point is taken when a hash of its coordinates falls below `size / n` of the hash
-/// range. Heavily repeated data (few distinct values: a tiled pattern) would give a few values
-/// many times over; then one point is drawn at a fixed pseudo-random position inside each of
-/// `size` equal blocks instead (no period in the data can line up with that pick).
-pub(super) fn subsample(points: &[[f64; 3]], size: usize, parallel: bool) -> Vec<[f64; 3]> {
+/// order: a point is taken when a hash of its coordinates falls below [`hash_cut`] (`picked`:
+/// those points, taken in the scan of [`fit_ellipsoid`], in their order). Heavily repeated
+/// data (few distinct values: a tiled pattern) would give a few values many times over; then
+/// one point is drawn at a fixed pseudo-random position inside each of `size` equal blocks
+/// instead (no period in the data can line up with that pick). The second value says whether
+/// the points were taken by their hash.
+pub(super) fn subsample(
+    points: &[[f64; 3]],
+    size: usize,
+    picked: Vec<[f64; 3]>,
+) -> (Vec<[f64; 3]>, bool) {
     let n = points.len();
-    let cut = ((size as f64 / n as f64) * 18_446_744_073_709_551_616.0) as u64;
-    let part = |c: &[[f64; 3]]| -> Vec<[f64; 3]> {
-        c.iter().filter(|p| point_hash(p) < cut).copied().collect()
-    };
-    let picked: Vec<[f64; 3]> = if parallel && n > 4 * kernel::CHUNK {
-        points
-            .par_chunks(4 * kernel::CHUNK)
-            .map(part)
-            .reduce(Vec::new, |mut a, b| {
-                a.extend_from_slice(&b);
-                a
-            })
-    } else {
-        part(points)
-    };
     if distinct_at_least(&picked, MIN_DISTINCT.min(size / 2)) && picked.len() >= size / 2 {
-        return picked;
+        return (picked, true);
     }
     let nb = size.min(n).max(1);
-    (0..nb)
+    let blocks = (0..nb)
         .map(|b| {
             let lo = b * n / nb;
             let hi = (b + 1) * n / nb;
             let r = splitmix64(b as u64 ^ 0x7472_6961_7863_616c) % (hi - lo) as u64;
             points[lo + r as usize]
         })
-        .collect()
+        .collect();
+    (blocks, false)
 }
 
 /// A subsample by content needs at least this many distinct points (else it is drawn by

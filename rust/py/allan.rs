@@ -6,7 +6,8 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// Overlapping Allan deviation accumulator; feed (rows, axes) float64 chunks with `push`.
+/// Allan deviation accumulator (overlapping, or not); feed (rows, axes) float64 chunks with
+/// `push`.
 #[pyclass(name = "AllanStream", module = "triaxcal._core")]
 pub struct AllanStream {
     inner: Allan,
@@ -14,10 +15,22 @@ pub struct AllanStream {
 
 #[pymethods]
 impl AllanStream {
+    /// `overlapping=False`: the non-overlapping deviation (terms start every `m` samples;
+    /// allantools' `adev`), `exact_up_to` then unused.
     #[new]
-    #[pyo3(signature = (rate_hz, axes, ms, *, exact_up_to))]
-    fn new(rate_hz: f64, axes: usize, ms: Vec<u64>, exact_up_to: Option<u64>) -> PyResult<Self> {
-        let inner = py_result(Allan::new(rate_hz, axes, &ms, exact_up_to))?;
+    #[pyo3(signature = (rate_hz, axes, ms, *, exact_up_to, overlapping=true))]
+    fn new(
+        rate_hz: f64,
+        axes: usize,
+        ms: Vec<u64>,
+        exact_up_to: Option<u64>,
+        overlapping: bool,
+    ) -> PyResult<Self> {
+        let inner = py_result(if overlapping {
+            Allan::new(rate_hz, axes, &ms, exact_up_to)
+        } else {
+            Allan::non_overlapping(rate_hz, axes, &ms)
+        })?;
         Ok(AllanStream { inner })
     }
 

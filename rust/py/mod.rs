@@ -10,6 +10,7 @@ mod allan;
 mod bounds;
 mod errors;
 mod fit;
+mod logs;
 
 use crate::batch;
 use crate::ellipsoid::{self, FitOptions, Method, Model};
@@ -260,6 +261,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_batch, m)?)?;
     m.add_function(wrap_pyfunction!(apply, m)?)?;
     m.add_class::<allan::AllanStream>()?;
+    m.add_function(wrap_pyfunction!(logs::read_ulog, m)?)?;
+    m.add_function(wrap_pyfunction!(logs::read_dataflash, m)?)?;
     bounds::add(m)?;
     Ok(())
 }

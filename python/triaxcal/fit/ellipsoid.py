@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from .. import _core
 from .._checks.arrays import (
     as_choice,
     as_count,
@@ -30,6 +29,13 @@ from .._checks.arrays import (
     lengths,
     require_radius,
 )
+from .._core import apply as _core_apply
+from .._core import descend_center as _core_descend_center
+from .._core import fit_batch as _core_fit_batch
+from .._core import fit_ellipsoid as _core_fit_ellipsoid
+from .._core import fit_sphere_linear as _core_fit_sphere_linear
+from .._core import grid_center as _core_grid_center
+from .._core import sphere_error as _core_sphere_error
 from ..conventions.names import PARAM_NAMES as _PARAM_NAMES
 from ..errors import CalibrationError
 
@@ -150,7 +156,7 @@ class EllipsoidFit:
         [[1.0, 0.0, 0.0]]
         """
         pts = as_points(points)
-        return _core.apply(pts, tuple(self.offset), self.matrix.tolist())
+        return _core_apply(pts, tuple(self.offset), self.matrix.tolist())
 
     @property
     def stderr_dict(self) -> dict[str, float]:
@@ -254,7 +260,7 @@ def fit_ellipsoid(
         # the common call: the core checks that the arguments are already plain and valid,
         # fits and builds the result (None: something needs validating or converting first,
         # or model is "auto")
-        fit = _core.fit_ellipsoid(
+        fit = _core_fit_ellipsoid(
             points, EllipsoidFit, model, radius, max_iter, tol, method, debias, None, ()
         )
         if fit is not None:
@@ -268,7 +274,7 @@ def fit_ellipsoid(
     opts = _options(model, radius, max_iter, tol, method, debias)
     fix, names = _fixed_vector(fixed, model, opts[1]) if fixed else (None, ())
     pts = points if _ready(points) else as_points(points)
-    fit = _core.fit_ellipsoid(pts, EllipsoidFit, *opts, fix, names)
+    fit = _core_fit_ellipsoid(pts, EllipsoidFit, *opts, fix, names)
     if fit is None:  # the options and points are plain now: the core must have fitted
         raise RuntimeError("triaxcal._core.fit_ellipsoid refused validated arguments")
     return fit
@@ -334,7 +340,7 @@ def fit_sphere_linear(points: Any) -> LinearSphere:
     Solves ``|p|^2 = 2 c.p + d``: fast and closed-form, but it minimises an algebraic error,
     so with noisy data :func:`fit_sphere` is more accurate.
     """
-    c, r, rms = _core.fit_sphere_linear(as_points(points))
+    c, r, rms = _core_fit_sphere_linear(as_points(points))
     return LinearSphere(center=_frozen(c), radius=float(r), rms=float(rms))
 
 
@@ -409,7 +415,7 @@ def fit_batch(
         bounds = np.zeros(len(parts) + 1, dtype=np.int64)
         bounds[1:] = np.cumsum([len(p) for p in parts])
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
-    d = _core.fit_batch(flat, bounds, *opts, fix)
+    d = _core_fit_batch(flat, bounds, *opts, fix)
     for k in ("offsets", "matrices", "radii", "rms", "converged", "iterations"):
         d[k].setflags(write=False)
     return BatchFit(
@@ -462,7 +468,7 @@ def sphere_error(points: Any, center: Any, radius: float) -> float:
     3.0
     """
     r = require_radius(radius)
-    return float(_core.sphere_error(as_points(points), as_vector(center, "center"), r))
+    return float(_core_sphere_error(as_points(points), as_vector(center, "center"), r))
 
 
 def descend_center(
@@ -490,7 +496,7 @@ def descend_center(
     step = as_real(step, "step", lo=0, lo_open=True)
     min_step = as_real(min_step, "min_step", lo=0, hi=step, lo_open=True)
     shrink = as_real(shrink, "shrink", lo=1, lo_open=True)
-    d = _core.descend_center(
+    d = _core_descend_center(
         as_points(points),
         r,
         start=as_vector(start, "start"),
@@ -509,7 +515,7 @@ def grid_center(points: Any, radius: float, *, lo: Any, hi: Any, step: float) ->
     search is refused before it starts, with a message saying so.
     """
     r = require_radius(radius)
-    d = _core.grid_center(
+    d = _core_grid_center(
         as_points(points),
         r,
         lo=as_vector(lo, "lo"),

@@ -27,8 +27,8 @@ from typing import Any, Union
 
 import numpy as np
 
-from .. import _core
 from .._checks import options as opt
+from .._core import AllanStream as _CoreAllanStream
 from ..errors import CalibrationError, NonFiniteError
 from ..quality.bounds import sample_rate
 
@@ -241,7 +241,7 @@ class AllanAccumulator:
             raise CalibrationError("unit must be a unit name such as 'deg/s' or 'counts'")
         self.unit = unit
         ms = cluster_sizes(taus, self.rate_hz, max_m)
-        self._core = _core.AllanStream(
+        self._core = _CoreAllanStream(
             self.rate_hz, self.axes, [int(v) for v in ms], exact_up_to=_exact(exact_up_to)
         )
 

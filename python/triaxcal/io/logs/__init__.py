@@ -8,14 +8,18 @@ sensor (time in s, readings with their unit, temperature in deg C when logged), 
 parameters, and the calibration the autopilot had already applied
 (:mod:`.autopilot`, with its equation), which ``undo_autopilot_cal=True`` removes.
 
-The readers use ``pyulog``, ``pymavlink`` and ``rosbags``, the optional ``logs`` extra
-(``pip install 'triaxcal[logs]'``); without them a :class:`~triaxcal.CalibrationError` names
-the extra.
+ULog and DataFlash files are framed and decoded by the Rust core (``rust/logs/``), in one
+streaming pass, with the same result as ``pyulog`` and ``pymavlink`` give; those two read the
+rare layouts the core leaves to them (ULog data appended at offsets, DataFlash format
+definitions damaged in ways only pymavlink's own reading reproduces), and ``rosbags`` reads
+ROS bags. They are the optional ``logs`` extra (``pip install 'triaxcal[logs]'``); where one is
+needed and missing a :class:`~triaxcal.CalibrationError` names the extra.
 """
 
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -119,6 +123,7 @@ def read_log(
         raise CalibrationError(f"unknown log format {fmt!r}: use one of {LOG_FORMATS}")
     if not (fmt == "ros2-bag" and Path(path).is_dir()):
         check_regular(path, what="log file")  # a pipe, device or socket is refused unread
+    reader: Callable[..., LogRecording]
     if fmt == "px4-ulog":
         from .ulog import read_ulog as reader
     elif fmt == "ardupilot-dataflash":

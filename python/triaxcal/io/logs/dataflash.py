@@ -1,4 +1,5 @@
-"""ArduPilot DataFlash (``.bin``) reader, with ``pymavlink`` (the optional ``logs`` extra).
+"""ArduPilot DataFlash (``.bin``) reader: FMT-driven decoding in the Rust core, pymavlink for rare
+damage.
 
 Messages: ``IMU`` (older logs: ``IMU2``, ``IMU3`` for the other IMUs; newer logs: one ``IMU``
 message with an instance field ``I``) with ``GyrX/Y/Z`` (rad/s), ``AccX/Y/Z`` (m/s^2) and the
@@ -14,12 +15,16 @@ throughout (boards that do not report it) is dropped.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import gc
 import io
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ... import _core
 from ...errors import CalibrationError
 from ..recording import LogRecording, Stream
 from . import require
@@ -33,34 +38,118 @@ _FIELDS = {
     "MAG": ("TimeUS", "MagX", "MagY", "MagZ", "OfsX", "OfsY", "OfsZ", "MOfsX", "MOfsY", "MOfsZ"),
 }
 
+# the fields a reading cannot do without
+_NEEDED = {"IMU": _FIELDS["IMU"][:7], "MAG": _FIELDS["MAG"][:4]}
+
 
 def _message_names(kind: str, instance: int) -> tuple[str, ...]:
     return (kind,) if instance == 0 else (kind, f"{kind}{instance + 1}")
 
 
-def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any = None,
-                   undo: bool = False) -> LogRecording:
-    """Read an ArduPilot DataFlash log; see the module docstring."""
-    dfreader = require("pymavlink.DFReader", "ArduPilot DataFlash logs", package="pymavlink")
-    if topic:
+@dataclasses.dataclass
+class _Parsed:
+    """What the reader takes from a DataFlash log: per sensor family (``IMU``, ``MAG``) the
+    fields of ``_FIELDS`` the messages have, in file order, as arrays (``TimeUS`` as int64,
+    the rest float64), or None; the parameters; the parameter names whose value changed; the
+    firmware text; the bytes skipped at damaged headers."""
+
+    rows: dict[str, dict[str, np.ndarray] | None]
+    params: dict[str, float]
+    changed: set[str]
+    firmware: str | None
+    skipped: int
+
+
+def _time_us(values: Any, p: Path) -> np.ndarray:
+    t = np.asarray(values)
+    if t.dtype == np.uint64 and t.size and int(t.max()) > np.iinfo(np.int64).max:
         raise CalibrationError(
-            "--topic selects ROS bag topics; for an ArduPilot log choose the IMU / compass "
-            "with --instance N (0 = IMU and MAG, 1 = IMU2 and MAG2, ...)"
+            f"{p} has a TimeUS beyond 2^63 us (a damaged message): cut the log before the "
+            "damage or read another one"
         )
-    inst = 0 if instance is None else instance
-    if not isinstance(inst, (int, np.integer)) or not 0 <= inst <= 2:
-        raise CalibrationError(f"--instance must be 0, 1 or 2 for ArduPilot, got {instance!r}")
-    p = Path(path)
-    if not p.is_file():
-        raise CalibrationError(f"log file {p} not found")
-    with open(p, "rb") as fh:
-        head = fh.read(2)
-    if head != b"\xa3\x95":
-        raise CalibrationError(
-            f"{p} is not an ArduPilot DataFlash log: it does not start with the 0xA3 0x95 "
-            "message header (an empty, text or damaged file?)"
-        )
-    wanted = sorted({*_message_names("IMU", inst), *_message_names("MAG", inst), "PARM", "MSG"})
+    return t.astype(np.int64)
+
+
+def _params_of(names: list[str], values: np.ndarray) -> tuple[dict[str, float], set[str]]:
+    params: dict[str, float] = {}
+    changed: set[str] = set()
+    for name, value in zip(names, values.tolist()):
+        if name in params and params[name] != value and name.startswith(
+                ("INS_", "COMPASS_", "AHRS_ORIENT")):
+            changed.add(name)
+        params[name] = value
+    return params, changed
+
+
+def _firmware(texts: list[str]) -> str | None:
+    for text in texts:
+        if ("Copter" in text or "Plane" in text or "Rover" in text or "Sub" in text
+                or "ArduPilot" in text):
+            return text
+    return None
+
+
+def _parse_core(p: Path, wanted: list[str], inst: int) -> _Parsed | None:
+    """The messages decoded by the Rust core; None when its format definitions are damaged
+    in a way only pymavlink's own reading reproduces."""
+    try:
+        d = _core.read_dataflash(str(p), wanted)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{p} is not a readable ArduPilot DataFlash log ({exc})") from None
+    if d["fallback"] is not None:
+        return None
+    msgs = d["messages"]
+    params: dict[str, float] = {}
+    changed: set[str] = set()
+    if "PARM" in msgs:
+        c = msgs["PARM"]["columns"]
+        if not isinstance(c.get("Name"), list) or not isinstance(c.get("Value"), np.ndarray):
+            return None
+        params, changed = _params_of(c["Name"], c["Value"].astype(np.float64))
+    firmware = None
+    if "MSG" in msgs:
+        text = msgs["MSG"]["columns"].get("Message")
+        if not isinstance(text, list):
+            return None
+        firmware = _firmware(text)
+    rows: dict[str, dict[str, np.ndarray] | None] = {}
+    for base in ("IMU", "MAG"):
+        parts = []
+        for kind in _message_names(base, inst):
+            if kind not in msgs:
+                continue
+            cols, seq = msgs[kind]["columns"], msgs[kind]["seq"]
+            if "I" in cols:  # newer logs: one message type, instance in field I
+                if cols["I"].dtype.kind not in "iu":
+                    return None
+                keep = cols["I"] == inst
+            elif kind == (base if inst == 0 else f"{base}{inst + 1}"):
+                keep = np.ones(len(seq), bool)
+            else:
+                continue
+            if keep.any():
+                present = {f: cols[f] for f in _FIELDS[base] if f in cols}
+                if any(isinstance(v, list) for v in present.values()):
+                    return None
+                parts.append((seq[keep], {f: v[keep] for f, v in present.items()}))
+        if not parts:
+            rows[base] = None
+            continue
+        if len({tuple(f) for _, f in parts}) > 1:
+            return None  # two message types with different fields: pymavlink's order decides
+        seq = np.concatenate([q for q, _ in parts])
+        order = np.argsort(seq, kind="stable")
+        merged = {f: np.concatenate([c[f] for _, c in parts])[order] for f in parts[0][1]}
+        rows[base] = {f: _time_us(v, p) if f == "TimeUS" else v.astype(np.float64)
+                      for f, v in merged.items()}
+    return _Parsed(rows, params, changed, firmware, int(d["bad_headers"]))
+
+
+def _parse_pymavlink(p: Path, wanted: list[str], inst: int) -> _Parsed:
+    """The same with pymavlink (logs with damaged format definitions, and the reference in
+    the tests)."""
+    dfreader = require("pymavlink.DFReader", "ArduPilot DataFlash logs with damaged formats",
+                       package="pymavlink")
     rows: dict[str, list[Any]] = {"IMU": [], "MAG": []}
     params: dict[str, float] = {}
     changed: set[str] = set()
@@ -84,10 +173,8 @@ def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any 
                 params[name] = value
                 continue
             if kind == "MSG":
-                text = str(getattr(msg, "Message", ""))
-                if firmware is None and ("Copter" in text or "Plane" in text or "Rover" in text
-                                         or "Sub" in text or "ArduPilot" in text):
-                    firmware = text
+                if firmware is None:
+                    firmware = _firmware([str(getattr(msg, "Message", ""))])
                 continue
             base = kind[:3]
             names = msg.get_fieldnames()
@@ -97,65 +184,118 @@ def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any 
             elif kind != (base if inst == 0 else f"{base}{inst + 1}"):
                 continue
             rows[base].append({f: getattr(msg, f) for f in _FIELDS[base] if f in names})
+        arrays: dict[str, dict[str, np.ndarray] | None] = {}
+        for base, r in rows.items():
+            arrays[base] = None if not r else {
+                f: np.array([x[f] for x in r], dtype=np.int64 if f == "TimeUS" else np.float64)
+                for f in r[0]
+            }
     except CalibrationError:
         raise
     except Exception as exc:  # pymavlink raises assorted errors on damaged files
-        raise CalibrationError(
-            f"{p} is not a readable ArduPilot DataFlash log ({type(exc).__name__}: {exc})"
-        ) from None
+        why = f"{p} is not a readable ArduPilot DataFlash log ({type(exc).__name__}: {exc})"
+        failed = True
+    else:
+        failed = False
     finally:
         if log is not None:
-            log.close()
-    skipped = quiet.getvalue().count("bad header")
-    if not rows["IMU"] and not rows["MAG"]:
+            with contextlib.suppress(Exception):
+                log.close()
+    if failed:
+        # a reader that failed while opening holds its file and memory map in the frames of
+        # the traceback, which are gone now: close them without a warning
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ResourceWarning)
+            gc.collect()
+        raise CalibrationError(why)
+    return _Parsed(arrays, params, changed, firmware, quiet.getvalue().count("bad header"))
+
+
+def read_dataflash(path: str | Path, *, instance: int | None = None, topic: Any = None,
+                   undo: bool = False, engine: str = "core") -> LogRecording:
+    """Read an ArduPilot DataFlash log; see the module docstring.
+
+    ``engine="pymavlink"`` reads with pymavlink instead of the Rust core (the same result,
+    but for ``meta["damaged_headers_skipped"]``, which pymavlink reports only on the
+    terminal).
+    """
+    if engine not in ("core", "pymavlink"):
+        raise CalibrationError(f"engine must be 'core' or 'pymavlink', got {engine!r}")
+    if topic:
+        raise CalibrationError(
+            "--topic selects ROS bag topics; for an ArduPilot log choose the IMU / compass "
+            "with --instance N (0 = IMU and MAG, 1 = IMU2 and MAG2, ...)"
+        )
+    inst = 0 if instance is None else instance
+    if not isinstance(inst, (int, np.integer)) or not 0 <= inst <= 2:
+        raise CalibrationError(f"--instance must be 0, 1 or 2 for ArduPilot, got {instance!r}")
+    inst = int(inst)
+    p = Path(path)
+    if not p.is_file():
+        raise CalibrationError(f"log file {p} not found")
+    with open(p, "rb") as fh:
+        head = fh.read(2)
+    if head != b"\xa3\x95":
+        raise CalibrationError(
+            f"{p} is not an ArduPilot DataFlash log: it does not start with the 0xA3 0x95 "
+            "message header (an empty, text or damaged file?)"
+        )
+    wanted = sorted({*_message_names("IMU", inst), *_message_names("MAG", inst), "PARM", "MSG"})
+    parsed = (_parse_core(p, wanted, inst) if engine == "core" else None) or _parse_pymavlink(
+        p, wanted, inst)
+    imu, mag = parsed.rows["IMU"], parsed.rows["MAG"]
+    for base, got in (("IMU", imu), ("MAG", mag)):
+        missing = [f for f in _NEEDED[base] if got is not None and f not in got]
+        if missing:
+            raise CalibrationError(
+                f"{p}: the {base} messages have no field {', '.join(missing)} (their format "
+                "definition (FMT) is damaged or of a layout this reader does not know): read "
+                "another log, or choose another sensor with --instance N"
+            )
+    if imu is None and mag is None:
         raise CalibrationError(
             f"{p} has no IMU or MAG messages for instance {inst} (is it a DataFlash .bin log "
             "with INS and compass logging enabled?)"
         )
     streams: dict[str, Stream] = {}
-    t_all = [np.array([r["TimeUS"] for r in rows[k]], dtype=np.int64) for k in ("IMU", "MAG")
-             if rows[k]]
-    t0 = min(int(t.min()) for t in t_all)
+    t0 = min(int(r["TimeUS"].min()) for r in (imu, mag) if r is not None)
     imu_name = "IMU" if inst == 0 else f"IMU{inst + 1}"
-    if rows["IMU"]:
-        r = rows["IMU"]
-        t = (np.array([x["TimeUS"] for x in r], dtype=np.int64) - t0) * 1e-6
-        tkey = "T" if "T" in r[0] else "Temp" if "Temp" in r[0] else None
-        temp = np.array([x[tkey] for x in r], dtype=np.float64) if tkey else None
+    if imu is not None:
+        t = (imu["TimeUS"] - t0) * 1e-6
+        tkey = "T" if "T" in imu else "Temp" if "Temp" in imu else None
+        temp = imu[tkey] if tkey else None
         if temp is not None and not np.any(temp != 0):
             temp = None
         order = np.argsort(t, kind="stable")
         for sensor, keys in (("accel", ("AccX", "AccY", "AccZ")),
                              ("gyro", ("GyrX", "GyrY", "GyrZ"))):
-            data = np.array([[x[k] for k in keys] for x in r], dtype=np.float64)
+            data = np.column_stack([imu[k] for k in keys])
             streams[sensor] = Stream(t=t[order], data=data[order],
                                      unit="m/s^2" if sensor == "accel" else "rad/s",
                                      temp_c=None if temp is None else temp[order],
                                      name=imu_name, calibrated=True)
     mag_offsets = None
     mag_motor = None
-    if rows["MAG"]:
-        r = rows["MAG"]
-        t = (np.array([x["TimeUS"] for x in r], dtype=np.int64) - t0) * 1e-6
+    if mag is not None:
+        t = (mag["TimeUS"] - t0) * 1e-6
         order = np.argsort(t, kind="stable")
-        data = np.array([[x["MagX"], x["MagY"], x["MagZ"]] for x in r], dtype=np.float64)
+        data = np.column_stack([mag["MagX"], mag["MagY"], mag["MagZ"]])
         streams["mag"] = Stream(t=t[order], data=data[order], unit="mG",
                                 name="MAG" if inst == 0 else f"MAG{inst + 1}", calibrated=True)
-        if "OfsX" in r[0]:
-            mag_offsets = np.array([[x["OfsX"], x["OfsY"], x["OfsZ"]] for x in r],
-                                   dtype=np.float64)[order]
-        if "MOfsX" in r[0]:
-            mag_motor = np.array([[x["MOfsX"], x["MOfsY"], x["MOfsZ"]] for x in r],
-                                 dtype=np.float64)[order]
+        if "OfsX" in mag:
+            mag_offsets = np.column_stack([mag["OfsX"], mag["OfsY"], mag["OfsZ"]])[order]
+        if "MOfsX" in mag:
+            mag_motor = np.column_stack([mag["MOfsX"], mag["MOfsY"], mag["MOfsZ"]])[order]
+    params = parsed.params
     cal = ardupilot_calibration(params, imu=inst, compass=inst) if params else None
     meta: dict[str, Any] = {
         "instance": inst,
-        "firmware": firmware,
-        "calibration_params_changed": sorted(changed),
+        "firmware": parsed.firmware,
+        "calibration_params_changed": sorted(parsed.changed),
         "messages": {k: v.name for k, v in streams.items()},
         "mag_offsets_logged": mag_offsets,
         "mag_motor_offsets_logged": mag_motor,
-        "damaged_headers_skipped": skipped,
+        "damaged_headers_skipped": parsed.skipped,
         "time_origin_us": t0,  # the log time (TimeUS) that is 0 s in every stream
     }
     return LogRecording(**streams, source=str(p), format="ardupilot-dataflash", params=params,

@@ -1,4 +1,4 @@
-"""PX4 ULog (``.ulg``) reader, with ``pyulog`` (the optional ``logs`` extra).
+"""PX4 ULog (``.ulg``) reader: framing and decoding in the Rust core, pyulog for rare layouts.
 
 Two ways to read a log:
 
@@ -16,6 +16,11 @@ Two ways to read a log:
 Times are ``timestamp_sample`` (or ``timestamp`` plus the ``*_timestamp_relative`` offset of
 ``sensor_combined``), in s from the first sample read. Readings repeated by
 ``sensor_combined`` while a slower sensor had no new sample are dropped.
+
+The file is framed and decoded by the Rust core (``rust/logs/ulog.rs``), in one pass with
+memory bounded by the window it reads through; it makes of a damaged file exactly what pyulog
+makes of it. A log with data appended at offsets (a rare layout) is read with ``pyulog``, the
+optional ``logs`` extra.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ... import _core
 from ...errors import CalibrationError
 from ..recording import LogRecording, Stream
 from . import require
@@ -62,10 +68,51 @@ def _dedupe(t_us: np.ndarray, data: np.ndarray, temp: np.ndarray | None = None
     return t_us[keep], data[keep], temp
 
 
+@dataclasses.dataclass(frozen=True)
+class _Parsed:
+    """What the reader takes from a ULog (as pyulog names it)."""
+
+    msg_info_dict: dict[str, Any]
+    initial_parameters: dict[str, Any]
+    changed_parameters: list[tuple[int, str, Any]]
+    topics: dict[tuple[str, int], dict[str, np.ndarray]]
+
+
+def _parse_core(p: Path) -> _Parsed | None:
+    """The topics of :data:`_TOPICS`, framed and decoded by the Rust core; None for a log with
+    appended data."""
+    try:
+        d = _core.read_ulog(str(p), list(_TOPICS))
+    except CalibrationError as exc:
+        raise CalibrationError(f"{p} is not a readable PX4 ULog file ({exc})") from None
+    if d["appended"]:
+        return None
+    return _Parsed(d["info"], d["initial_parameters"], d["changed_parameters"],
+                   {(name, multi_id): cols for name, multi_id, cols in d["datasets"]})
+
+
+def _parse_pyulog(p: Path) -> _Parsed:
+    """The same with pyulog (logs with appended data, and the reference in the tests)."""
+    pyulog = require("pyulog", "PX4 ULog files with appended data")
+    try:
+        with open(p, "rb") as fh:
+            ulog = pyulog.ULog(fh, list(_TOPICS))
+    except Exception as exc:  # pyulog raises plain Exceptions on damaged files
+        raise CalibrationError(
+            f"{p} is not a readable PX4 ULog file ({type(exc).__name__}: {exc})"
+        ) from None
+    return _Parsed(ulog.msg_info_dict, ulog.initial_parameters, ulog.changed_parameters,
+                   {(d.name, d.multi_id): d.data for d in ulog.data_list})
+
+
 def read_ulog(path: str | Path, *, instance: int | None = None, topic: Any = None,
-              undo: bool = False) -> LogRecording:
-    """Read a PX4 ULog; see the module docstring. Used through :func:`triaxcal.read_log`."""
-    pyulog = require("pyulog", "PX4 ULog files")
+              undo: bool = False, engine: str = "core") -> LogRecording:
+    """Read a PX4 ULog; see the module docstring. Used through :func:`triaxcal.read_log`.
+
+    ``engine="pyulog"`` reads with pyulog instead of the Rust core (same result).
+    """
+    if engine not in ("core", "pyulog"):
+        raise CalibrationError(f"engine must be 'core' or 'pyulog', got {engine!r}")
     if topic:
         raise CalibrationError(
             "--topic selects ROS bag topics; for a PX4 ULog choose a sensor with --instance N "
@@ -74,17 +121,11 @@ def read_ulog(path: str | Path, *, instance: int | None = None, topic: Any = Non
     p = Path(path)
     if not p.is_file():
         raise CalibrationError(f"log file {p} not found")
-    try:
-        with open(p, "rb") as fh:
-            ulog = pyulog.ULog(fh, list(_TOPICS))
-    except Exception as exc:  # pyulog raises plain Exceptions on damaged files
-        raise CalibrationError(
-            f"{p} is not a readable PX4 ULog file ({type(exc).__name__}: {exc})"
-        ) from None
+    ulog = (_parse_core(p) if engine == "core" else None) or _parse_pyulog(p)
     params = {str(k): v for k, v in ulog.initial_parameters.items()}
     changed = sorted({name for _, name, _ in ulog.changed_parameters
                       if name.startswith(("CAL_", "SENS_BOARD", "TC_"))})
-    topics = {(d.name, d.multi_id): d.data for d in ulog.data_list}
+    topics = ulog.topics
     version = _version(ulog.msg_info_dict)
     meta: dict[str, Any] = {
         "firmware": ".".join(map(str, version)) if version else None,
