@@ -9,7 +9,10 @@ use pyo3::types::PyDict;
 pub fn add(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let d = PyDict::new(m.py());
     d.set_item("MAX_AXIS_RATIO", bounds::MAX_AXIS_RATIO)?;
-    d.set_item("MAX_UNCONVERGED_OFFSET_SE", bounds::MAX_UNCONVERGED_OFFSET_SE)?;
+    d.set_item(
+        "MAX_UNCONVERGED_OFFSET_SE",
+        bounds::MAX_UNCONVERGED_OFFSET_SE,
+    )?;
     d.set_item("WARN_OFFSET_SE", bounds::WARN_OFFSET_SE)?;
     d.set_item("WARN_RMS_FRACTION", bounds::WARN_RMS_FRACTION)?;
     d.set_item("WARN_MIN_SPREAD", bounds::WARN_MIN_SPREAD)?;

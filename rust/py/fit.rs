@@ -147,7 +147,9 @@ fn exact_options(
 }
 
 /// `points` as an exact, aligned, C-contiguous float64 (N, 3) ndarray, or `None`.
-pub(super) fn ready_points<'a, 'py>(points: &'a Bound<'py, PyAny>) -> Option<&'a Bound<'py, PyArray2<f64>>> {
+pub(super) fn ready_points<'a, 'py>(
+    points: &'a Bound<'py, PyAny>,
+) -> Option<&'a Bound<'py, PyArray2<f64>>> {
     let arr = points.cast_exact::<PyArray2<f64>>().ok()?;
     (arr.shape()[1] == 3 && arr.is_c_contiguous() && arr.is_aligned()).then_some(arr)
 }
@@ -182,7 +184,10 @@ fn clear_writeable<D>(arr: &Bound<'_, PyArray<f64, D>>) {
 /// as it would with any numpy function reading it; rust-numpy's checker does not see such
 /// writers either.)
 #[allow(unsafe_code)]
-pub(super) fn points_under_gil<'a>(_py: Python<'_>, arr: &'a Bound<'_, PyArray2<f64>>) -> &'a [[f64; 3]] {
+pub(super) fn points_under_gil<'a>(
+    _py: Python<'_>,
+    arr: &'a Bound<'_, PyArray2<f64>>,
+) -> &'a [[f64; 3]] {
     // SAFETY: as above; `ready_points` checked that the array is C-contiguous and aligned, of
     // float64 and shape (N, 3).
     let flat = unsafe { arr.as_slice() }.expect("checked contiguous and aligned");

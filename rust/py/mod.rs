@@ -4,9 +4,9 @@
 //! `fit_ellipsoid` (`fit.rs`): it checks plain arguments itself, keeps the GIL for small fits
 //! and builds the `EllipsoidFit`, for the sake of small calls.
 
+mod allan;
 #[cfg(feature = "bench-hooks")]
 mod bench;
-mod allan;
 mod bounds;
 mod errors;
 mod fit;
