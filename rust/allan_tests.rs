@@ -1,0 +1,154 @@
+//! Tests of `allan.rs` (kept apart to keep that module short).
+
+use super::*;
+
+/// The textbook formula, straight from the phase (f64; fine for small inputs).
+fn naive(y: &[f64], m: usize, stride: usize) -> (f64, usize) {
+    let mut x = vec![0.0];
+    for v in y {
+        x.push(x.last().unwrap() + v);
+    }
+    let n = y.len();
+    let mut s = 0.0;
+    let mut terms = 0;
+    let mut i = 0;
+    while i + 2 * m <= n {
+        let t = x[i + 2 * m] - 2.0 * x[i + m] + x[i];
+        s += t * t;
+        terms += 1;
+        i += stride;
+    }
+    ((s / (2.0 * terms as f64)).sqrt() / m as f64, terms)
+}
+
+fn lcg(n: usize, seed: u64) -> Vec<f64> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        })
+        .collect()
+}
+
+#[test]
+fn matches_the_formula_in_any_chunking() {
+    let y = lcg(20_000, 7);
+    let ms = [1u64, 2, 3, 7, 64, 1000, 4999];
+    for chunk in [1usize, 3, 4096, 5000, 20_000] {
+        let mut acc = Allan::new(10.0, 1, &ms, None).unwrap();
+        for c in y.chunks(chunk) {
+            acc.push(c).unwrap();
+        }
+        let r = acc.result();
+        for (ci, c) in r.clusters.iter().enumerate() {
+            let (want, terms) = naive(&y, c.m as usize, 1);
+            assert_eq!(r.terms[ci], terms as u64);
+            assert!(
+                (r.adev[ci][0] - want).abs() <= 1e-12 * want,
+                "chunk {chunk} m {}: {} vs {want}",
+                c.m,
+                r.adev[ci][0]
+            );
+            assert!((r.taus[ci] - c.m as f64 / 10.0).abs() < 1e-15);
+        }
+    }
+}
+
+#[test]
+fn many_batches_of_three_axes_match_the_formula() {
+    let n = 3 * BATCH + 123;
+    let cols: Vec<Vec<f64>> = (0..3).map(|k| lcg(n, 10 + k)).collect();
+    let rows: Vec<f64> = (0..n)
+        .flat_map(|i| [cols[0][i], cols[1][i], cols[2][i]])
+        .collect();
+    let ms = [1u64, 2, 5, 1024, 20_000];
+    for parallel in [false, true] {
+        let mut acc = Allan::new(10.0, 3, &ms, None).unwrap();
+        acc.set_parallel(parallel);
+        acc.push(&rows).unwrap();
+        let r = acc.result();
+        let mut na = Allan::non_overlapping(10.0, 3, &ms).unwrap();
+        na.set_parallel(parallel);
+        na.push(&rows[..3 * 1000]).unwrap();
+        na.push(&rows[3 * 1000..]).unwrap();
+        let rn = na.result();
+        for (ci, c) in r.clusters.iter().enumerate() {
+            for k in 0..3 {
+                let (want, terms) = naive(&cols[k], c.m as usize, 1);
+                assert_eq!(r.terms[ci], terms as u64);
+                assert!(
+                    (r.adev[ci][k] - want).abs() <= 1e-12 * want,
+                    "m {} axis {k}",
+                    c.m
+                );
+                let (want, terms) = naive(&cols[k], c.m as usize, c.m as usize);
+                assert_eq!(rn.terms[ci], terms as u64);
+                assert!(
+                    (rn.adev[ci][k] - want).abs() <= 1e-12 * want,
+                    "adev m {}",
+                    c.m
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn strided_levels_match_the_strided_formula() {
+    let y = lcg(300_000, 3);
+    let ms = [5000u64, 9000, 70_000];
+    let r = oadev(&y, 1, 1.0, &ms, Some(4096)).unwrap();
+    for (ci, c) in r.clusters.iter().enumerate() {
+        assert!(c.stride > 1 && c.m / c.stride >= DECIMATED_STARTS);
+        let (want, terms) = naive(&y, c.m as usize, c.stride as usize);
+        assert_eq!(r.terms[ci], terms as u64);
+        assert!((r.adev[ci][0] - want).abs() <= 1e-11 * want);
+    }
+}
+
+#[test]
+fn axes_are_independent_and_offsets_do_not_matter() {
+    let a = lcg(10_000, 1);
+    let b = lcg(10_000, 2);
+    let rows: Vec<f64> = a
+        .iter()
+        .zip(&b)
+        .flat_map(|(x, y)| [*x + 1e6, *y * 3.0])
+        .collect();
+    let r = oadev(&rows, 2, 1.0, &[1, 10, 100], None).unwrap();
+    for (ci, c) in r.clusters.iter().enumerate() {
+        let wa = naive(&a, c.m as usize, 1).0;
+        let wb = naive(&b, c.m as usize, 1).0 * 3.0;
+        // a bias of 1e6 times the noise costs no digits (double-double phase)
+        assert!(
+            (r.adev[ci][0] - wa).abs() <= 1e-9 * wa,
+            "{} {wa}",
+            r.adev[ci][0]
+        );
+        assert!((r.adev[ci][1] - wb).abs() <= 1e-12 * wb);
+    }
+}
+
+#[test]
+fn bad_input_is_an_error_and_leaves_the_state_alone() {
+    assert!(Allan::new(0.0, 1, &[1], None).is_err());
+    assert!(Allan::new(1.0, 0, &[1], None).is_err());
+    assert!(Allan::new(1.0, 1, &[0], None).is_err());
+    assert!(Allan::new(1.0, 1, &[], None).is_err());
+    assert!(Allan::new(1.0, 1, &[1 << 40], None).is_err());
+    let mut acc = Allan::new(1.0, 2, &[1], None).unwrap();
+    assert!(acc.push(&[1.0, 2.0, 3.0]).is_err());
+    let e = acc.push(&[1.0, 2.0, f64::NAN, 0.0]).unwrap_err();
+    assert!(e.to_string().contains("row 1"), "{e}");
+    assert!(acc.is_empty());
+}
+
+#[test]
+fn memory_is_fixed_by_the_clusters_not_the_samples() {
+    let ms: Vec<u64> = (0..40).map(|k| 1u64 << k).collect();
+    let acc = Allan::new(1000.0, 3, &ms, Some(65_536)).unwrap();
+    assert!(acc.memory_bytes() < 40_000_000, "{}", acc.memory_bytes());
+}
