@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ... import _core
+from ..._core import read_dataflash as _core_read_dataflash
 from ...errors import CalibrationError
 from ..recording import LogRecording, Stream
 from . import require
@@ -93,7 +93,7 @@ def _parse_core(p: Path, wanted: list[str], inst: int) -> _Parsed | None:
     """The messages decoded by the Rust core; None when its format definitions are damaged
     in a way only pymavlink's own reading reproduces."""
     try:
-        d = _core.read_dataflash(str(p), wanted)
+        d = _core_read_dataflash(str(p), wanted)
     except CalibrationError as exc:
         raise CalibrationError(f"{p} is not a readable ArduPilot DataFlash log ({exc})") from None
     if d["fallback"] is not None:

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ... import _core
+from ..._core import read_ulog as _core_read_ulog
 from ...errors import CalibrationError
 from ..recording import LogRecording, Stream
 from . import require
@@ -82,7 +82,7 @@ def _parse_core(p: Path) -> _Parsed | None:
     """The topics of :data:`_TOPICS`, framed and decoded by the Rust core; None for a log with
     appended data."""
     try:
-        d = _core.read_ulog(str(p), list(_TOPICS))
+        d = _core_read_ulog(str(p), list(_TOPICS))
     except CalibrationError as exc:
         raise CalibrationError(f"{p} is not a readable PX4 ULog file ({exc})") from None
     if d["appended"]:
