@@ -32,7 +32,7 @@ from ..detect import Rejection, detect_still
 from ..errors import CalibrationError
 from ..quality.bounds import GYRO_SATURATION_COUNTS
 from ..quality.bounds import sample_rate as check_rate
-from .turntable import TurntableFit, fit_turntable, turntable_plateaus
+from .turntable import TurntableFit, _as_rate, _ro, fit_turntable, turntable_plateaus
 
 __all__ = [
     "GyroBias",
@@ -53,19 +53,6 @@ AXES = "xyz"
 TOO_SMALL = "rotation too small"
 TOO_LARGE = "rotation too large"
 NOT_ONE_AXIS = "not about one axis"
-
-
-def _ro(a: Any) -> np.ndarray:
-    arr = np.array(a, dtype=np.float64)
-    arr.setflags(write=False)
-    return arr
-
-
-def _as_rate(gyro: Any, name: str = "gyro") -> np.ndarray:
-    arr = as_samples(gyro, name, finite=True)
-    if arr.shape[0] < 2:
-        raise CalibrationError(f"{name} needs at least 2 samples, got {arr.shape[0]}")
-    return arr
 
 
 def _times(n: int, t: Any, rate_hz: float | None) -> np.ndarray:
