@@ -28,6 +28,10 @@
 //!
 //! The non-overlapping deviation (allantools' `adev`; [`Allan::non_overlapping`]) is the same
 //! sum with the starts `m` apart (`d = m`): a cluster then costs one term per `m` samples.
+//! When every size is a power of two (octave taus) it skips the phases: the terms are the
+//! differences of consecutive block sums, and a pyramid of double-double block sums (pairs of
+//! blocks of `m` make the blocks of `2m`) gives them all for about one addition per sample
+//! (`allan_octave.rs`).
 //!
 //! Memory is fixed when the accumulator is made (a few MB per axis for clusters up to 2⁴⁰
 //! samples) and independent of the number of samples; the work per sample is one
@@ -40,6 +44,13 @@
 //! order, so that the result does not depend on the number of threads.
 
 use crate::error::{CalError, Result};
+
+#[path = "allan_kernels.rs"]
+mod kernels;
+#[path = "allan_octave.rs"]
+mod octave;
+
+use kernels::{gather, phases, sum_terms};
 
 /// Rows of a chunk processed together (phases are computed for a batch, then every cluster
 /// reads them as contiguous slices, which vectorises).
@@ -175,6 +186,9 @@ pub struct Allan {
     axes: Vec<Axis>,
     n: u64,
     parallel: bool,
+    /// The pyramid of block sums that replaces the levels and axes above (non-overlapping
+    /// deviation at power-of-two sizes only).
+    octave: Option<octave::Octave>,
 }
 
 /// The Allan deviation of everything pushed so far.
@@ -215,8 +229,28 @@ impl Allan {
     /// An accumulator of the non-overlapping Allan deviation (allantools' `adev`): each
     /// cluster size `m` of `ms` starts its terms every `m` samples, so that consecutive
     /// clusters do not overlap.
+    ///
+    /// When every size is a power of two (octave taus), the deviation is computed from a
+    /// pyramid of block sums (see `allan_octave.rs`): the same terms, in double-double, at a
+    /// fraction of the work.
     pub fn non_overlapping(rate_hz: f64, axes: usize, ms: &[u64]) -> Result<Allan> {
+        Allan::non_overlapping_with(rate_hz, axes, ms, true)
+    }
+
+    /// [`Allan::non_overlapping`], with the pyramid of block sums allowed or not (`false`:
+    /// the general path, whatever the sizes).
+    pub(crate) fn non_overlapping_with(
+        rate_hz: f64,
+        axes: usize,
+        ms: &[u64],
+        pyramid: bool,
+    ) -> Result<Allan> {
         crate::error::check_positive("rate_hz", rate_hz)?;
+        if axes == 0 || axes > 64 {
+            return Err(CalError::InvalidArgument(format!(
+                "axes must be between 1 and 64 channels, got {axes}"
+            )));
+        }
         let mut clusters = Vec::with_capacity(ms.len());
         for &m in ms {
             if m == 0 {
@@ -228,6 +262,20 @@ impl Allan {
         }
         clusters.sort_by_key(|c| c.m);
         clusters.dedup_by_key(|c| c.m);
+        if pyramid {
+            if let Some(octave) = octave::Octave::new(axes, &clusters) {
+                return Ok(Allan {
+                    rate_hz,
+                    nax: axes,
+                    clusters,
+                    levels: Vec::new(),
+                    axes: Vec::new(),
+                    n: 0,
+                    parallel: true,
+                    octave: Some(octave),
+                });
+            }
+        }
         Allan::with_clusters(rate_hz, axes, clusters)
     }
 
@@ -298,6 +346,7 @@ impl Allan {
             axes: vec![axis; axes],
             n: 0,
             parallel: true,
+            octave: None,
         };
         // phase index 0 (x_0 = 0) belongs to every level
         for a in acc.axes.iter_mut() {
@@ -340,6 +389,9 @@ impl Allan {
 
     /// Bytes held by the rings and buffers (fixed at construction).
     pub fn memory_bytes(&self) -> usize {
+        if let Some(o) = &self.octave {
+            return o.memory_bytes();
+        }
         let per_axis: usize = self.levels.iter().map(|l| 16 * l.cap).sum::<usize>()
             + 16 * BATCH
             + 16 * self.clusters.len();
@@ -357,7 +409,15 @@ impl Allan {
                 self.nax
             )));
         }
-        if let Some(i) = samples.iter().position(|v| !v.is_finite()) {
+        let rows = samples.len() / self.nax;
+        let bad = if let Some(o) = &mut self.octave {
+            // checks each batch as it goes (while it is in cache) and undoes the push on a
+            // non-finite value
+            o.push(samples, rows, self.parallel)
+        } else {
+            first_non_finite(samples)
+        };
+        if let Some(i) = bad {
             return Err(CalError::InvalidArgument(format!(
                 "sample {} (row {} of the whole stream, axis {}) is NaN or infinite: drop or \
                  repair non-finite readings before computing the Allan deviation",
@@ -366,7 +426,10 @@ impl Allan {
                 i % self.nax
             )));
         }
-        let rows = samples.len() / self.nax;
+        if self.octave.is_some() {
+            self.n += rows as u64;
+            return Ok(());
+        }
         let mut start = 0usize;
         while start < rows {
             let b = BATCH.min(rows - start);
@@ -538,6 +601,9 @@ impl Allan {
 
     /// The Allan deviation of everything pushed so far.
     pub fn result(&self) -> AllanResult {
+        if let Some(o) = &self.octave {
+            return o.result(&self.clusters, self.rate_hz, self.n);
+        }
         let nc = self.clusters.len();
         let mut terms = vec![0u64; nc];
         for l in &self.levels {
@@ -574,138 +640,23 @@ impl Allan {
     }
 }
 
-/// The double-double running phase (`hi` the plain sum, `lo` the exact sum of its rounding
-/// errors: TwoSum) over the readings `col[0], col[nax], col[2 nax]...` less `reference`,
-/// written to `dh` and `dl` (one per reading).
-#[inline(always)]
-fn phases(
-    hi: &mut f64,
-    lo: &mut f64,
-    reference: f64,
-    col: &[f64],
-    nax: usize,
-    dh: &mut [f64],
-    dl: &mut [f64],
-) {
-    let n = dh.len().min(dl.len());
-    let col = &col[..(n.max(1) - 1) * nax + usize::from(n > 0)];
-    let (mut h, mut l) = (*hi, *lo);
-    for i in 0..n {
-        let y = col[i * nax] - reference;
-        let s = h + y;
-        let bp = s - h;
-        l += (h - (s - bp)) + (y - bp);
-        h = s;
-        dh[i] = h;
-        dl[i] = l;
-    }
-    *hi = h;
-    *lo = l;
-}
-
-/// Copies `count` entries, every `d`-th from position `q` of a source ring of `src_cap`
-/// entries, to consecutive positions from `p` of `dst` (a ring of `cap` entries), in runs
-/// that wrap around neither ring.
-#[allow(clippy::too_many_arguments)]
-fn gather(
-    src_hi: &[f64],
-    src_lo: &[f64],
-    src_cap: usize,
-    mut q: usize,
-    d: usize,
-    mut count: usize,
-    dst: &mut Ring,
-    cap: usize,
-    mut p: usize,
-) {
-    while count > 0 {
-        let run = count
-            .min(cap - p)
-            .min((src_cap.min(src_hi.len()) - q).div_ceil(d));
-        let (dh, dl) = (&mut dst.hi[p..p + run], &mut dst.lo[p..p + run]);
-        let last = q + (run - 1) * d;
-        let (sh, sl) = (&src_hi[q..=last], &src_lo[q..=last]);
-        for i in 0..run {
-            dh[i] = sh[i * d];
-            dl[i] = sl[i * d];
-        }
-        count -= run;
-        p = (p + run) % cap;
-        q += run * d;
-        if q >= src_cap {
-            q -= src_cap;
-        }
-    }
-}
-
-/// Σ (x_e - 2 x_{e-mp} + x_{e-2mp})² for entries `e0 ..= e1` of a ring, in contiguous runs.
-fn sum_terms(ring: &Ring, cap: usize, mp: usize, e0: u64, e1: u64) -> f64 {
-    let mut total = 0.0;
-    let mut e = e0;
-    while e <= e1 {
-        let p2 = (e % cap as u64) as usize;
-        let p1 = ((e - mp as u64) % cap as u64) as usize;
-        let p0 = ((e - 2 * mp as u64) % cap as u64) as usize;
-        let len = ((e1 - e + 1) as usize)
-            .min(cap - p2)
-            .min(cap - p1)
-            .min(cap - p0);
-        total += run(
-            &ring.hi[p2..p2 + len],
-            &ring.hi[p1..p1 + len],
-            &ring.hi[p0..p0 + len],
-            &ring.lo[p2..p2 + len],
-            &ring.lo[p1..p1 + len],
-            &ring.lo[p0..p0 + len],
-        );
-        e += len as u64;
-    }
-    total
-}
-
-/// One contiguous run of terms (dispatches to the AVX2 build where the CPU has it).
-#[inline]
-fn run(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::has_avx2_fma() {
-        return crate::simd::avx2_call!(run_avx2(h2, h1, h0, l2, l1, l0));
-    }
-    run_impl(h2, h1, h0, l2, l1, l0)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn run_avx2(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
-    run_impl(h2, h1, h0, l2, l1, l0)
-}
-
-/// The second difference is formed as a difference of window sums, hi and lo parts apart, so
-/// that no digit is lost to the size of the phase; lanes of [`LANES`] terms vectorise.
-#[inline(always)]
-fn run_impl(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
-    let n = h2.len();
-    let (h1, h0, l2, l1, l0) = (&h1[..n], &h0[..n], &l2[..n], &l1[..n], &l0[..n]);
+/// The index of the first NaN or infinite value, if any. The common case, all finite, is one
+/// vectorised pass: `v * 0` is 0 for a finite `v` and NaN otherwise.
+fn first_non_finite(samples: &[f64]) -> Option<usize> {
     let mut acc = [0.0f64; LANES];
-    let full = n / LANES * LANES;
-    let lanes = h2[..full]
-        .chunks_exact(LANES)
-        .zip(h1[..full].chunks_exact(LANES))
-        .zip(h0[..full].chunks_exact(LANES))
-        .zip(l2[..full].chunks_exact(LANES))
-        .zip(l1[..full].chunks_exact(LANES))
-        .zip(l0[..full].chunks_exact(LANES));
-    for (((((a2, a1), a0), b2), b1), b0) in lanes {
+    let chunks = samples.chunks_exact(LANES);
+    let tail = chunks.remainder();
+    for c in chunks {
         for j in 0..LANES {
-            let t = ((a2[j] - a1[j]) - (a1[j] - a0[j])) + ((b2[j] - b1[j]) - (b1[j] - b0[j]));
-            acc[j] += t * t;
+            acc[j] += c[j] * 0.0;
         }
     }
-    let mut tail = 0.0;
-    for i in full..n {
-        let t = ((h2[i] - h1[i]) - (h1[i] - h0[i])) + ((l2[i] - l1[i]) - (l1[i] - l0[i]));
-        tail += t * t;
+    let clean = acc.iter().chain(tail).all(|v| v.is_finite());
+    if clean {
+        None
+    } else {
+        samples.iter().position(|v| !v.is_finite())
     }
-    acc.iter().sum::<f64>() + tail
 }
 
 /// Non-overlapping Allan deviation of samples held in memory (`rows × axes`, row-major), at

@@ -152,3 +152,118 @@ fn memory_is_fixed_by_the_clusters_not_the_samples() {
     let acc = Allan::new(1000.0, 3, &ms, Some(65_536)).unwrap();
     assert!(acc.memory_bytes() < 40_000_000, "{}", acc.memory_bytes());
 }
+
+/// Integer readings on a large bias: every block sum and term is an integer, so the exact
+/// non-overlapping deviation is known (sums of squares in u128).
+fn exact_adev_of_integers(y: &[i64], m: usize) -> (f64, u64) {
+    let blocks: Vec<i128> = y
+        .chunks_exact(m)
+        .map(|c| c.iter().map(|&v| v as i128).sum())
+        .collect();
+    let s: u128 = blocks
+        .windows(2)
+        .map(|w| ((w[1] - w[0]) * (w[1] - w[0])) as u128)
+        .sum();
+    let terms = blocks.len().saturating_sub(1) as u64;
+    (((s as f64) / (2.0 * terms as f64)).sqrt() / m as f64, terms)
+}
+
+#[test]
+fn the_pyramid_of_block_sums_is_exact_on_integers_in_any_chunking() {
+    // readings of 2^40 plus small integer noise (a random walk and white noise): 2^40 times the
+    // noise; the block sums of 2^17 samples reach 2^57, past a double's 53 bits
+    let n = 2 * BATCH + 4099;
+    let mut s = 12345u64;
+    let mut walk = 0i64;
+    let y: Vec<i64> = (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            walk += ((s >> 60) as i64) - 8;
+            (1i64 << 40) + walk + ((s >> 33) & 0xff) as i64
+        })
+        .collect();
+    let yf: Vec<f64> = y.iter().map(|&v| v as f64).collect();
+    let ms: Vec<u64> = (0..16).map(|k| 1u64 << k).collect();
+    for chunk in [1usize, 7, 4096, BATCH + 1, n] {
+        for pyramid in [true, false] {
+            let mut acc = Allan::non_overlapping_with(100.0, 1, &ms, pyramid).unwrap();
+            assert_eq!(acc.octave.is_some(), pyramid);
+            for c in yf.chunks(chunk) {
+                acc.push(c).unwrap();
+            }
+            let r = acc.result();
+            assert_eq!(r.n, n as u64);
+            for (ci, c) in r.clusters.iter().enumerate() {
+                assert_eq!(c.stride, c.m);
+                let (want, terms) = exact_adev_of_integers(&y, c.m as usize);
+                assert_eq!(r.terms[ci], terms, "m {}", c.m);
+                if terms == 0 {
+                    assert!(r.adev[ci][0].is_nan());
+                    continue;
+                }
+                assert!(
+                    (r.adev[ci][0] - want).abs() <= 1e-14 * want,
+                    "pyramid {pyramid} chunk {chunk} m {}: {} vs exact {want}",
+                    c.m,
+                    r.adev[ci][0]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_pyramid_matches_the_general_path_on_three_axes_in_parallel() {
+    let n = 5 * BATCH + 77;
+    let rows: Vec<f64> = lcg(3 * n, 99)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| 250.0 * (i % 3) as f64 + v)
+        .collect();
+    let ms: Vec<u64> = vec![1, 2, 8, 64, 1 << 12, 1 << 15];
+    let mut general = Allan::non_overlapping_with(50.0, 3, &ms, false).unwrap();
+    general.push(&rows).unwrap();
+    let want = general.result();
+    for parallel in [false, true] {
+        let mut acc = Allan::non_overlapping(50.0, 3, &ms).unwrap();
+        assert!(acc.octave.is_some());
+        acc.set_parallel(parallel);
+        acc.push(&rows[..3 * 5000]).unwrap();
+        acc.push(&rows[3 * 5000..]).unwrap();
+        let r = acc.result();
+        assert_eq!(r.terms, want.terms);
+        assert_eq!(r.taus, want.taus);
+        assert_eq!(r.clusters, want.clusters);
+        for (ci, dev) in r.adev.iter().enumerate() {
+            for k in 0..3 {
+                let w = want.adev[ci][k];
+                assert!((dev[k] - w).abs() <= 1e-13 * w, "m {} axis {k}", ms[ci]);
+            }
+        }
+    }
+    // a size that is not a power of two takes the general path
+    assert!(Allan::non_overlapping(50.0, 3, &[1, 3])
+        .unwrap()
+        .octave
+        .is_none());
+    // an axis with nothing yet past the last level reports NaN, with 0 terms
+    let mut few = Allan::non_overlapping(50.0, 1, &[1, 1 << 10]).unwrap();
+    few.push(&[1.0, 2.0, 4.0]).unwrap();
+    let r = few.result();
+    assert_eq!(r.terms, vec![2, 0]);
+    assert!((r.adev[0][0] - (2.5f64 / 2.0).sqrt()).abs() < 1e-15);
+    assert!(r.adev[1][0].is_nan());
+    // a non-finite value adds nothing, even one batch after the first
+    assert!(few.push(&[1.0, f64::INFINITY]).is_err());
+    assert_eq!(few.len(), 3);
+    let mut late = vec![3.0; 2 * BATCH + 10];
+    late[BATCH + 5] = f64::NAN;
+    let e = few.push(&late).unwrap_err();
+    assert!(
+        e.to_string().contains(&format!("row {}", 3 + BATCH + 5)),
+        "{e}"
+    );
+    assert_eq!(format!("{:?}", few.result()), format!("{r:?}"));
+}

@@ -1,0 +1,138 @@
+//! The inner loops of the general Allan deviation path (`allan.rs`): the double-double
+//! phases, the strided copies between levels, and the sums of the terms.
+
+use super::{Ring, LANES};
+
+/// The double-double running phase (`hi` the plain sum, `lo` the exact sum of its rounding
+/// errors: TwoSum) over the readings `col[0], col[nax], col[2 nax]...` less `reference`,
+/// written to `dh` and `dl` (one per reading).
+#[inline(always)]
+pub(super) fn phases(
+    hi: &mut f64,
+    lo: &mut f64,
+    reference: f64,
+    col: &[f64],
+    nax: usize,
+    dh: &mut [f64],
+    dl: &mut [f64],
+) {
+    let n = dh.len().min(dl.len());
+    let col = &col[..(n.max(1) - 1) * nax + usize::from(n > 0)];
+    let (mut h, mut l) = (*hi, *lo);
+    for i in 0..n {
+        let y = col[i * nax] - reference;
+        let s = h + y;
+        let bp = s - h;
+        l += (h - (s - bp)) + (y - bp);
+        h = s;
+        dh[i] = h;
+        dl[i] = l;
+    }
+    *hi = h;
+    *lo = l;
+}
+
+/// Copies `count` entries, every `d`-th from position `q` of a source ring of `src_cap`
+/// entries, to consecutive positions from `p` of `dst` (a ring of `cap` entries), in runs
+/// that wrap around neither ring.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn gather(
+    src_hi: &[f64],
+    src_lo: &[f64],
+    src_cap: usize,
+    mut q: usize,
+    d: usize,
+    mut count: usize,
+    dst: &mut Ring,
+    cap: usize,
+    mut p: usize,
+) {
+    while count > 0 {
+        let run = count
+            .min(cap - p)
+            .min((src_cap.min(src_hi.len()) - q).div_ceil(d));
+        let (dh, dl) = (&mut dst.hi[p..p + run], &mut dst.lo[p..p + run]);
+        let last = q + (run - 1) * d;
+        let (sh, sl) = (&src_hi[q..=last], &src_lo[q..=last]);
+        for i in 0..run {
+            dh[i] = sh[i * d];
+            dl[i] = sl[i * d];
+        }
+        count -= run;
+        p = (p + run) % cap;
+        q += run * d;
+        if q >= src_cap {
+            q -= src_cap;
+        }
+    }
+}
+
+/// Σ (x_e - 2 x_{e-mp} + x_{e-2mp})² for entries `e0 ..= e1` of a ring, in contiguous runs.
+pub(super) fn sum_terms(ring: &Ring, cap: usize, mp: usize, e0: u64, e1: u64) -> f64 {
+    let mut total = 0.0;
+    let mut e = e0;
+    while e <= e1 {
+        let p2 = (e % cap as u64) as usize;
+        let p1 = ((e - mp as u64) % cap as u64) as usize;
+        let p0 = ((e - 2 * mp as u64) % cap as u64) as usize;
+        let len = ((e1 - e + 1) as usize)
+            .min(cap - p2)
+            .min(cap - p1)
+            .min(cap - p0);
+        total += run(
+            &ring.hi[p2..p2 + len],
+            &ring.hi[p1..p1 + len],
+            &ring.hi[p0..p0 + len],
+            &ring.lo[p2..p2 + len],
+            &ring.lo[p1..p1 + len],
+            &ring.lo[p0..p0 + len],
+        );
+        e += len as u64;
+    }
+    total
+}
+
+/// One contiguous run of terms (dispatches to the AVX2 build where the CPU has it).
+#[inline]
+fn run(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::has_avx2_fma() {
+        return crate::simd::avx2_call!(run_avx2(h2, h1, h0, l2, l1, l0));
+    }
+    run_impl(h2, h1, h0, l2, l1, l0)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn run_avx2(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
+    run_impl(h2, h1, h0, l2, l1, l0)
+}
+
+/// The second difference is formed as a difference of window sums, hi and lo parts apart, so
+/// that no digit is lost to the size of the phase; lanes of [`LANES`] terms vectorise.
+#[inline(always)]
+fn run_impl(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f64]) -> f64 {
+    let n = h2.len();
+    let (h1, h0, l2, l1, l0) = (&h1[..n], &h0[..n], &l2[..n], &l1[..n], &l0[..n]);
+    let mut acc = [0.0f64; LANES];
+    let full = n / LANES * LANES;
+    let lanes = h2[..full]
+        .chunks_exact(LANES)
+        .zip(h1[..full].chunks_exact(LANES))
+        .zip(h0[..full].chunks_exact(LANES))
+        .zip(l2[..full].chunks_exact(LANES))
+        .zip(l1[..full].chunks_exact(LANES))
+        .zip(l0[..full].chunks_exact(LANES));
+    for (((((a2, a1), a0), b2), b1), b0) in lanes {
+        for j in 0..LANES {
+            let t = ((a2[j] - a1[j]) - (a1[j] - a0[j])) + ((b2[j] - b1[j]) - (b1[j] - b0[j]));
+            acc[j] += t * t;
+        }
+    }
+    let mut tail = 0.0;
+    for i in full..n {
+        let t = ((h2[i] - h1[i]) - (h1[i] - h0[i])) + ((l2[i] - l1[i]) - (l1[i] - l0[i]));
+        tail += t * t;
+    }
+    acc.iter().sum::<f64>() + tail
+}
