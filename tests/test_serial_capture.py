@@ -326,6 +326,24 @@ def test_stop_event_and_poses_limit(tmp_path):
     assert res.stopped_by == "poses" and len(res.poses) == 3
 
 
+@pytest.mark.parametrize("request_byte", [b"F", b"!"])
+def test_the_script_starts_when_the_host_first_asks_for_data(request_byte):
+    # a host slow to open the port (`demo --live` starts its page first, on a loaded machine
+    # for longer than the first still pose lasts at 10x) must not miss the start of the script
+    with device(speed=10.0, loop=False) as dev:
+        time.sleep(0.5)  # 5 s of simulated time go by with nobody listening
+        assert dev.sim_time_s == 0.0 and not dev.sent
+        with serial.Serial(dev.port, 115200, timeout=1) as port:
+            port.write(request_byte)
+            assert port.read(21)
+            port.write(b"P")
+        sent = list(dev.sent)
+        assert dev.sim_time_s > 0.0
+    assert sent and sent[0].index == 0  # the first sample of the script, not the 500th
+    streamed = [f.index for f in sent if not f.polled]
+    assert streamed == list(range(len(streamed)))
+
+
 def test_progress_line_bell_and_suggestion(tmp_path):
     import io
 

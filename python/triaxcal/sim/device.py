@@ -114,6 +114,11 @@ class SimDevice:
     ``ID:<serial>\\r\\n``; a 68-byte MotionCal calibration packet with a valid CRC is
     answered with ``Cal1:``/``Cal2:`` lines (stored in :attr:`motioncal`).
 
+    The script starts when the host first asks for data (a poll, or a mode byte that starts a
+    stream; at :meth:`start` when ``mode`` streams from power-on), as a user starts turning
+    the board once the capture runs: the time the host takes to open the port costs none of
+    the script (at ``speed=10`` a host that took 0.3 s would miss the first 3 s still pose).
+
     Parameters
     ----------
     imu : SimIMU, optional
@@ -230,7 +235,8 @@ class SimDevice:
         self._pending_bytes = 0
         self._seq = 0
         self._next = 0  # next sample index to stream
-        self._t0 = 0.0
+        self._t0 = 0.0  # when the script started (see _begin)
+        self._started = False
         self._unplug_until = 0.0
         self._silent_until = 0.0
         self._stall_until = 0.0
@@ -252,6 +258,7 @@ class SimDevice:
         self._stop.clear()
         self._plug()
         self._t0 = time.monotonic()
+        self._started = self.boot_mode is not None  # a board that streams from power-on
         self._thread = threading.Thread(target=self._run, name="SimDevice", daemon=True)
         self._thread.start()
         return self
@@ -301,8 +308,8 @@ class SimDevice:
 
     @property
     def sim_time_s(self) -> float:
-        """Simulated seconds since :meth:`start`."""
-        return (time.monotonic() - self._t0) * self.speed
+        """Simulated seconds since the script started (0 until the host asks for data)."""
+        return (time.monotonic() - self._t0) * self.speed if self._started else 0.0
 
     def frames_sent(self, *, intact_only: bool = False) -> np.ndarray:
         """Values of the frames sent so far, (n, K) int (``intact_only``: undamaged ones)."""
@@ -344,7 +351,15 @@ class SimDevice:
 
     # -- the device loop
     def _sample(self) -> int:
+        if not self._started:
+            return 0
         return int((time.monotonic() - self._t0) * self.speed * self.rate_hz)
+
+    def _begin(self) -> None:
+        """Start the script's clock (once): the host asked for data."""
+        if not self._started:
+            self._t0 = time.monotonic()
+            self._started = True
 
     def _run(self) -> None:
         n = len(self._frames)
@@ -434,6 +449,7 @@ class SimDevice:
     def _command(self, b: int) -> None:
         c = bytes([b])
         if c == b"!":
+            self._begin()
             cur = min(self._sample(), len(self._frames) - 1) if not self.loop else self._sample()
             # the request came after the input was last seen empty; an earlier reply queued
             # since then reaches the host back to back with this one
@@ -446,6 +462,8 @@ class SimDevice:
             new = MODE_BYTES[c]
             if new != self.protocol:
                 self.protocol = new
+                if new is not None:
+                    self._begin()
                 self._next = self._sample()
 
     def _motioncal(self, packet: bytes) -> None:
