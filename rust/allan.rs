@@ -60,6 +60,9 @@ const BATCH: usize = 16_384;
 /// waking the pool exceeds the gain).
 const PARALLEL_TERMS: u64 = 1 << 16;
 
+/// The phases of a batch of this many rows are made on several threads (one axis each).
+const PARALLEL_PHASES: usize = 4096;
+
 /// The new terms of a cluster in a batch: (level, cluster size in entries of the level,
 /// first and last entry).
 type Task = (usize, usize, u64, u64);
@@ -491,7 +494,7 @@ impl Allan {
             ax.hi = hi;
             ax.lo = lo;
         };
-        if parallel && nax > 1 && (b * nax) as u64 >= PARALLEL_TERMS {
+        if parallel && nax > 1 && b >= PARALLEL_PHASES {
             use rayon::prelude::*;
             axes.par_iter_mut().enumerate().for_each(run_phases);
         } else {

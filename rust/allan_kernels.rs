@@ -17,16 +17,51 @@ pub(super) fn phases(
     dl: &mut [f64],
 ) {
     let n = dh.len().min(dl.len());
-    let col = &col[..(n.max(1) - 1) * nax + usize::from(n > 0)];
+    if n == 0 {
+        return;
+    }
+    let col = &col[..(n - 1) * nax + 1];
+    let (dh, dl) = (&mut dh[..n], &mut dl[..n]);
     let (mut h, mut l) = (*hi, *lo);
-    for i in 0..n {
-        let y = col[i * nax] - reference;
+    let mut step = |y: f64, oh: &mut f64, ol: &mut f64| {
+        let y = y - reference;
         let s = h + y;
         let bp = s - h;
         l += (h - (s - bp)) + (y - bp);
         h = s;
-        dh[i] = h;
-        dl[i] = l;
+        *oh = h;
+        *ol = l;
+    };
+    // the readings of one axis, every nax-th value: a fixed stride for the usual axis counts
+    // (no index arithmetic or bounds checks in the loop)
+    match nax {
+        1 => {
+            for ((y, oh), ol) in col.iter().zip(dh.iter_mut()).zip(dl.iter_mut()) {
+                step(*y, oh, ol);
+            }
+        }
+        3 => {
+            let (lh, bh) = dh.split_last_mut().expect("n > 0");
+            let (ll, bl) = dl.split_last_mut().expect("n > 0");
+            for ((y, oh), ol) in col[..(n - 1) * 3]
+                .chunks_exact(3)
+                .zip(bh.iter_mut())
+                .zip(bl.iter_mut())
+            {
+                step(y[0], oh, ol);
+            }
+            step(col[(n - 1) * 3], lh, ll);
+        }
+        _ => {
+            for ((y, oh), ol) in col
+                .iter()
+                .step_by(nax)
+                .zip(dh.iter_mut())
+                .zip(dl.iter_mut())
+            {
+                step(*y, oh, ol);
+            }
+        }
     }
     *hi = h;
     *lo = l;
