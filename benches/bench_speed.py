@@ -494,8 +494,9 @@ def notes(ins: dict[str, float]) -> list[str]:
                      "(six loads and eight additions per four terms, where plain-double phases "
                      "would take three and four, and lose the digits the double-double keeps), "
                      "two of them m and 2m samples back; at 1e6 samples every cluster is exact, "
-                     "the ring of phases is 2^19 entries (16 MB per axis), and each cluster past "
-                     "the caches reads it again from memory, which is why its instruction rate "
+                     "the ring of phases holds 2^19 + 16,387 of them (8.7 MB per axis), and each "
+                     "cluster past the caches reads it again from memory, which is why its "
+                     "instruction rate "
                      "is below the non-overlapping one.")
         out.append(text)
     return out
