@@ -11,7 +11,10 @@ Two detectors, both vectorised over numpy arrays (millions of samples per second
   - gyroscope (``gyro_columns``): every axis of its window-mean rate is within
     ``gyro_threshold`` of the rate at the last still window (the bias), and changed by at
     most that much from the previous window -- this sees the twists about the vertical that
-    leave the accelerometer unchanged;
+    leave the accelerometer unchanged. The first bias is provisional (a twist at the start of a
+    recording looks still to the accelerometer): it is confirmed when the board rests at it
+    again after a move, and replaced by a rate the board rests at after different moves (see
+    :data:`REANCHOR_WINDOWS`);
   - magnetometer (``mag_columns``): every axis of its window mean changed by at most
     ``mag_threshold`` from the previous window's.
 

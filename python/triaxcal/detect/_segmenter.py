@@ -31,9 +31,20 @@ NOISE_MIN_WINDOWS = 6
 _Q25_HALF_NORMAL = 0.31863936396437514
 #: The gyroscope's bias is the median of its means over this many most recent still windows.
 BIAS_WINDOWS = 9
-#: When the gyroscope stays steady for this many windows at a rate that differs from that bias
-#: by less than :data:`REANCHOR_MAX` thresholds (it drifted while the board moved), that rate
-#: becomes the new bias; a larger steady rate is a turn at constant speed and stays motion.
+#: When the gyroscope stays steady for this many windows in a row at a rate that differs from
+#: the bias by less than :data:`REANCHOR_MAX` thresholds (it drifted while the board moved),
+#: that rate becomes the new bias; a larger steady rate is a turn at constant speed and stays
+#: motion.
+#:
+#: The first bias is provisional: it is taken from the first windows the accelerometer calls
+#: steady, before the gyroscope's threshold is known, and a twist about the vertical at the
+#: start of a recording looks steady to the accelerometer. It is confirmed when the board
+#: comes back to rest at it after a move. Until then, this many steady windows off it that
+#: agree with one another (within the threshold), after at least two different moves, replace
+#: it however far they lie from it, and are confirmed: coming back to one rate after different
+#: moves is the sign of rest that the provisional bias lacks (turns by hand do not repeat a
+#: speed to a few tenths of a degree a second), and windows in a row would need poses longer
+#: than a calibration's usual 1 s.
 REANCHOR_WINDOWS = 8
 REANCHOR_MAX = 16.0
 
@@ -189,6 +200,11 @@ class _Segmenter:
         # gyro means (about ref) of the most recent still windows: their median is the bias
         self.gyro_hist: deque[np.ndarray] = deque(maxlen=BIAS_WINDOWS)
         self.rate_fail = 0  # windows in a row that failed only the rate test
+        self.moves = 0  # moves seen so far (and hold-offs, in which the board may have moved)
+        self.bias_moves = 0  # moves seen when the bias was first taken or last replaced
+        self.bias_sure = False  # the board came to rest at the bias again after a move
+        # provisional bias only: rates of recent steady windows off it, with the moves seen then
+        self.off_bias: deque[tuple[np.ndarray, int]] = deque(maxlen=4 * REANCHOR_WINDOWS)
         self.skip_until = 0  # windows before this index are ignored (hold-off)
         self.fresh = True  # the next window opens a run whatever it reads
         # current run: first window index, window count, accumulated sums
@@ -286,11 +302,13 @@ class _Segmenter:
                 self.fresh = False
                 self._open(k)
                 self.rate_fail = 0
+                self.moves += 1
                 i += 1
                 continue
             if not steady[i]:
                 # motion: close any open run; the last moving window may open the next run
                 self.rate_fail = 0
+                self.moves += 1
                 if self.run_len:
                     new += self._close(k)
                     if self.skip_until > k:
@@ -306,14 +324,21 @@ class _Segmenter:
                 away = float(np.abs(g - bias).max())
                 if away > gyro_thr[i]:  # False for NaN
                     self.rate_fail += 1
-                    if self.rate_fail >= REANCHOR_WINDOWS and away <= REANCHOR_MAX * gyro_thr[i]:
+                    if not self.bias_sure and self._rest_again(g, gyro_thr[i]):
+                        pass  # the provisional bias is replaced
+                    elif self.rate_fail >= REANCHOR_WINDOWS and \
+                            away <= REANCHOR_MAX * gyro_thr[i]:
                         # steady for a while, a little off: the bias moved, follow it
                         self.gyro_hist.clear()
                         self.gyro_hist.append(g)
                         self.rate_fail = 0
+                        self.bias_moves = self.moves
                     self._open(k)  # still turning: this window opens the run instead
                     i += 1
                     continue
+                if not self.bias_sure and away <= gyro_thr[i] and self.moves > self.bias_moves:
+                    self.bias_sure = True  # at rest at the bias again after a move
+                    self.off_bias.clear()
             self.rate_fail = 0
             # steady windows i..j-1 extend the open run (opened by the window before i)
             if self.run_done:
@@ -324,7 +349,7 @@ class _Segmenter:
                 self._extend(cs1[i + take] - cs1[i], cs2[i + take] - cs2[i], take)
                 new += self._close(k + take - 1, keep_open=True)
                 if gcols is not None:
-                    self.gyro_hist.extend(means[max(i, i + take - BIAS_WINDOWS):i + take, gcols])
+                    self._keep_rates(means[max(i, i + take - BIAS_WINDOWS):i + take, gcols])
                 if self.skip_until > k + take - 1:
                     i += take
                     continue
@@ -332,9 +357,31 @@ class _Segmenter:
             else:
                 self._extend(cs1[j] - cs1[i], cs2[j] - cs2[i], j - i)
             if gcols is not None:
-                self.gyro_hist.extend(means[max(i, j - BIAS_WINDOWS):j, gcols])
+                self._keep_rates(means[max(i, j - BIAS_WINDOWS):j, gcols])
             i = j
         return new
+
+    def _keep_rates(self, rates: np.ndarray) -> None:
+        """The gyroscope's rates over still windows: the bias is their median."""
+        if not self.gyro_hist and len(rates):
+            self.bias_moves = self.moves  # the first bias, provisional
+        self.gyro_hist.extend(rates)
+
+    def _rest_again(self, g: np.ndarray, thr: float) -> bool:
+        """A steady window at rate ``g`` is off the provisional bias: when
+        :data:`REANCHOR_WINDOWS` such windows, after at least two different moves, agree with
+        it, their rate becomes the (confirmed) bias."""
+        self.off_bias.append((g.copy(), self.moves))
+        near = [(r, m) for r, m in self.off_bias if float(np.abs(r - g).max()) <= thr]
+        if len(near) < REANCHOR_WINDOWS or len({m for _, m in near}) < 2:
+            return False
+        self.gyro_hist.clear()
+        self.gyro_hist.extend(r for r, _ in near[-BIAS_WINDOWS:])
+        self.rate_fail = 0
+        self.bias_moves = self.moves
+        self.bias_sure = True
+        self.off_bias.clear()
+        return True
 
     def _open(self, win: int) -> None:
         # the opening window (the last one that differed from its predecessor) may still hold

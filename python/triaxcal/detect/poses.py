@@ -143,8 +143,11 @@ def detect_poses(
         The accelerometer's channels, for detection and for :attr:`PoseDetection.points`.
     gyro_columns : sequence of 3 ints, optional
         The gyroscope's channels. A window whose mean rate on any axis is more than
-        ``gyro_threshold`` away from the rate of the last still window (the bias), or from the
-        previous window's, is motion.
+        ``gyro_threshold`` away from the bias (the median rate of the last still windows), or
+        from the previous window's, is motion. The first bias is provisional until the board
+        rests at it again after a move; until then, ``REANCHOR_WINDOWS`` steady windows at
+        another rate, after two different moves, replace it (a twist about the vertical at the
+        start of a recording looks still to the accelerometer).
     gyro_threshold : float, optional
         In the gyroscope's input units (counts, deg/s...). ``None``: learnt from its noise,
         ``NOISE_Z`` standard deviations of the change of a window mean between still windows
