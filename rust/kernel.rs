@@ -211,6 +211,8 @@ impl<S: Simd, const P: usize> Lanes<S, P> {
 /// than 8: the rows go through the stack either way, and each block ends by adding its 45
 /// `JᵀJ` partial sums into memory, half as often; callgrind: 6 % fewer instructions a pass.)
 const BLOCK: usize = 16;
+// `run` spells out the groups of a block: one of 16
+const _: () = assert!(BLOCK == 16);
 
 /// One group's Jacobian rows (one vector per parameter), plain residual and noise direction.
 struct Rows<S: Simd, const P: usize> {
@@ -391,7 +393,11 @@ fn run<S: Simd, const P: usize, const JTJ: bool, const DEB: bool, const COV: boo
     }
     let (blocks, tail) = groups.as_chunks::<BLOCK>();
     for b in blocks {
-        block!(b, 16, [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]);
+        block!(
+            b,
+            16,
+            [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]
+        );
     }
     let (b8, tail) = tail.as_chunks::<8>();
     for b in b8 {

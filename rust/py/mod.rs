@@ -225,12 +225,24 @@ fn fit_batch<'py>(
     }
     // read-only arrays of their final shapes, made at once (no reshape, no flags to set)
     let out = PyDict::new(py);
-    out.set_item(intern!(py, "offsets"), fit::frozen(py, &offsets, Ix2(nb, 3))?)?;
-    out.set_item(intern!(py, "matrices"), fit::frozen(py, &matrices, Ix3(nb, 3, 3))?)?;
+    out.set_item(
+        intern!(py, "offsets"),
+        fit::frozen(py, &offsets, Ix2(nb, 3))?,
+    )?;
+    out.set_item(
+        intern!(py, "matrices"),
+        fit::frozen(py, &matrices, Ix3(nb, 3, 3))?,
+    )?;
     out.set_item(intern!(py, "radii"), fit::frozen(py, &radii, Ix1(nb))?)?;
     out.set_item(intern!(py, "rms"), fit::frozen(py, &rms, Ix1(nb))?)?;
-    out.set_item(intern!(py, "converged"), fit::frozen(py, &converged, Ix1(nb))?)?;
-    out.set_item(intern!(py, "iterations"), fit::frozen(py, &iterations, Ix1(nb))?)?;
+    out.set_item(
+        intern!(py, "converged"),
+        fit::frozen(py, &converged, Ix1(nb))?,
+    )?;
+    out.set_item(
+        intern!(py, "iterations"),
+        fit::frozen(py, &iterations, Ix1(nb))?,
+    )?;
     out.set_item(intern!(py, "errors"), errors)?;
     out.set_item(intern!(py, "error_kinds"), kinds)?;
     Ok(out)
