@@ -290,6 +290,31 @@ def test_batch_from_a_3d_array():
         tc.fit_batch(np.zeros((4, 10, 2)))
 
 
+def test_batch_of_equal_sets_splits_in_the_core_as_bounds_would():
+    from triaxcal import _core
+
+    sets = np.stack([distorted_sphere(120, offset=OFFSET, matrix=MATRIX, noise=0.003,
+                                      seed=40 + i)[0] for i in range(6)])
+    sets[2, 7, 1] = np.inf  # one bad set among good ones
+    flat = sets.reshape(-1, 3)
+    args = ("full", 1.0, 100, 1e-10, "lm", True)
+    by_size = _core.fit_batch(flat, 120, *args)
+    by_bounds = _core.fit_batch(flat, np.arange(7, dtype=np.int64) * 120, *args)
+    for k in ("offsets", "matrices", "radii", "rms", "converged", "iterations"):
+        np.testing.assert_array_equal(by_size[k], by_bounds[k])
+        assert not by_size[k].flags.writeable  # read-only as they come
+    assert by_size["matrices"].shape == (6, 3, 3) and by_size["errors"] == by_bounds["errors"]
+    assert by_size["errors"][2] is not None and by_size["error_kinds"][2] == "NonFiniteError"
+    # a size that does not split the rows into whole sets is refused, not rounded
+    for size in (0, 7, -120):
+        with pytest.raises(tc.CalibrationError, match="bounds out of range"):
+            _core.fit_batch(flat, size, *args)
+    # the facade's result (a view of the same array, no copy) agrees
+    b = tc.fit_batch(sets, radius=1.0)
+    np.testing.assert_array_equal(b.offsets, by_size["offsets"])
+    assert not b.offsets.flags.writeable and b.errors[2] is not None
+
+
 # ---------------------------------------------------------------------------- seed searches
 
 

@@ -65,7 +65,7 @@ def fit_ellipsoid(
 ) -> Any: ...
 def fit_batch(
     points: _Points,
-    bounds: npt.NDArray[np.int64],
+    bounds: npt.NDArray[np.int64] | int,
     model: str,
     radius: float | None,
     max_iter: int,

@@ -130,7 +130,9 @@ pub(super) fn finish<const P: usize>(
             }
         }
     }
-    let mut stderr: Vec<f64> = se_th[..3].iter().map(|v| v * s).collect();
+    // at its final length at once (growing it from 3 to P entries cost a reallocation)
+    let mut stderr: Vec<f64> = Vec::with_capacity(P);
+    stderr.extend(se_th[..3].iter().map(|v| v * s));
     if model == Model::Sphere {
         let k = th[3].abs();
         stderr.push(s / (k * k) * se_th[3]); // data radius = s / k

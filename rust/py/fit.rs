@@ -154,12 +154,12 @@ pub(super) fn ready_points<'a, 'py>(
     (arr.shape()[1] == 3 && arr.is_c_contiguous() && arr.is_aligned()).then_some(arr)
 }
 
-/// A new read-only float64 array of `shape` holding `values` (row-major).
-fn frozen<'py, D: numpy::ndarray::Dimension>(
+/// A new read-only array of `shape` holding `values` (row-major).
+pub(super) fn frozen<'py, T: numpy::Element + Clone, D: numpy::ndarray::Dimension>(
     py: Python<'py>,
-    values: &[f64],
+    values: &[T],
     shape: D,
-) -> PyResult<Bound<'py, PyArray<f64, D>>> {
+) -> PyResult<Bound<'py, PyArray<T, D>>> {
     let view = numpy::ndarray::ArrayView::from_shape(shape, values)
         .map_err(|e| CalibrationError::new_err(format!("internal: result shape: {e}")))?;
     let arr = PyArray::from_array(py, &view);
@@ -171,7 +171,7 @@ fn frozen<'py, D: numpy::ndarray::Dimension>(
 /// rust-numpy's own `make_nonwriteable` does, without going through its borrow checker (which
 /// allocates a hash table per borrow: about 1,000 instructions, a tenth of a fit of 10 points).
 #[allow(unsafe_code)]
-fn clear_writeable<D>(arr: &Bound<'_, PyArray<f64, D>>) {
+fn clear_writeable<T, D>(arr: &Bound<'_, PyArray<T, D>>) {
     // SAFETY: the GIL is held and the array is new: no view of it, Rust or Python, exists yet.
     unsafe { (*_PyArray_GET_ITEM_DATA(arr.as_array_ptr())).flags &= !NPY_ARRAY_WRITEABLE }
 }

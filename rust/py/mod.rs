@@ -18,10 +18,12 @@ use crate::error::CalError;
 use crate::sphere::{self, Descent, DescentOptions};
 use errors::{py_result, CalibrationError, DegenerateDataError, NonFiniteError, TooFewPointsError};
 use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+    Ix1, Ix2, Ix3, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyUntypedArrayMethods,
 };
+use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyInt, PyList};
 
 /// Borrows an (N, 3) aligned, C-contiguous float64 array as points, without copying. (The
 /// Python facade converts anything else first: `triaxcal._checks.arrays.as_points`.)
@@ -144,14 +146,16 @@ fn fit_sphere_linear(
     Ok((f.center, f.radius, f.rms))
 }
 
-/// Fits many sets: `points` holds them back to back, set i is rows `bounds[i]..bounds[i+1]`.
-/// Returns (offsets (B,3), matrices (B,9), radii, rms, converged, iterations, errors).
+/// Fits many sets: `points` holds them back to back, set i is rows `bounds[i]..bounds[i+1]`;
+/// `bounds` may instead be a positive int `n`: sets of `n` rows each (the rows a whole number
+/// of them). Returns a dict of read-only arrays: offsets (B, 3), matrices (B, 3, 3), radii,
+/// rms, converged, iterations; and the lists errors and error_kinds.
 #[pyfunction]
 #[pyo3(signature = (points, bounds, model, radius, max_iter, tol, method, debias, fixed=None))]
 fn fit_batch<'py>(
     py: Python<'py>,
     points: PyReadonlyArray2<'py, f64>,
-    bounds: PyReadonlyArray1<'py, i64>,
+    bounds: &Bound<'py, PyAny>,
     model: &str,
     radius: Option<f64>,
     max_iter: usize,
@@ -161,19 +165,31 @@ fn fit_batch<'py>(
     fixed: Option<[Option<f64>; 9]>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let pts = self::points(&points)?;
-    let b = bounds
-        .as_slice()
-        .map_err(|_| CalibrationError::new_err("bounds must be contiguous"))?;
     let mut opts = options(model, radius, max_iter, tol, method, debias, fixed)?;
     opts.diagnostics = false; // a batch reports no warnings
-    let mut sets = Vec::with_capacity(b.len().saturating_sub(1));
-    for w in b.windows(2) {
-        let (lo, hi) = (w[0], w[1]);
-        if lo < 0 || hi < lo || hi as usize > pts.len() {
-            return Err(CalibrationError::new_err("batch bounds out of range"));
+    let out_of_range = || CalibrationError::new_err("batch bounds out of range");
+    let sets: Vec<&[[f64; 3]]> = if bounds.is_exact_instance_of::<PyInt>() {
+        // sets of equal size: no bounds array to make and borrow
+        let size: usize = bounds.extract().map_err(|_| out_of_range())?;
+        if size == 0 || pts.len() % size != 0 {
+            return Err(out_of_range());
         }
-        sets.push(&pts[lo as usize..hi as usize]);
-    }
+        pts.chunks_exact(size).collect()
+    } else {
+        let bounds = bounds.extract::<PyReadonlyArray1<'py, i64>>()?;
+        let b = bounds
+            .as_slice()
+            .map_err(|_| CalibrationError::new_err("bounds must be contiguous"))?;
+        let mut sets = Vec::with_capacity(b.len().saturating_sub(1));
+        for w in b.windows(2) {
+            let (lo, hi) = (w[0], w[1]);
+            if lo < 0 || hi < lo || hi as usize > pts.len() {
+                return Err(out_of_range());
+            }
+            sets.push(&pts[lo as usize..hi as usize]);
+        }
+        sets
+    };
     let results = py.detach(|| batch::fit_batch(&sets, &opts));
     let nb = results.len();
     let mut offsets = vec![f64::NAN; nb * 3];
@@ -182,43 +198,53 @@ fn fit_batch<'py>(
     let mut rms = vec![f64::NAN; nb];
     let mut converged = vec![false; nb];
     let mut iterations = vec![0i64; nb];
-    let mut errors: Vec<Option<String>> = vec![None; nb];
-    let mut kinds: Vec<Option<&'static str>> = vec![None; nb];
+    let errors = PyList::empty(py);
+    let kinds = PyList::empty(py);
     for (i, r) in results.into_iter().enumerate() {
         match r {
             Ok(f) => {
                 offsets[3 * i..3 * i + 3].copy_from_slice(&f.offset);
-                for a in 0..3 {
-                    matrices[9 * i + 3 * a..9 * i + 3 * a + 3].copy_from_slice(&f.matrix[a]);
-                }
+                matrices[9 * i..9 * i + 9].copy_from_slice(f.matrix.as_flattened());
                 radii[i] = f.radius;
                 rms[i] = f.rms;
                 converged[i] = f.converged;
                 iterations[i] = f.iterations as i64;
+                errors.append(py.None())?;
+                kinds.append(py.None())?;
             }
             Err(e) => {
-                kinds[i] = Some(match e {
+                kinds.append(match e {
                     CalError::NonFinite { .. } => "NonFiniteError",
                     CalError::TooFewPoints { .. } => "TooFewPointsError",
                     CalError::Degenerate { .. } => "DegenerateDataError",
                     CalError::InvalidArgument(_) => "CalibrationError",
-                });
-                errors[i] = Some(e.to_string());
+                })?;
+                errors.append(e.to_string())?;
             }
         }
     }
+    // read-only arrays of their final shapes, made at once (no reshape, no flags to set)
     let out = PyDict::new(py);
-    out.set_item("offsets", PyArray1::from_vec(py, offsets).reshape([nb, 3])?)?;
     out.set_item(
-        "matrices",
-        PyArray1::from_vec(py, matrices).reshape([nb, 3, 3])?,
+        intern!(py, "offsets"),
+        fit::frozen(py, &offsets, Ix2(nb, 3))?,
     )?;
-    out.set_item("radii", PyArray1::from_vec(py, radii))?;
-    out.set_item("rms", PyArray1::from_vec(py, rms))?;
-    out.set_item("converged", PyArray1::from_vec(py, converged))?;
-    out.set_item("iterations", PyArray1::from_vec(py, iterations))?;
-    out.set_item("errors", errors)?;
-    out.set_item("error_kinds", kinds)?;
+    out.set_item(
+        intern!(py, "matrices"),
+        fit::frozen(py, &matrices, Ix3(nb, 3, 3))?,
+    )?;
+    out.set_item(intern!(py, "radii"), fit::frozen(py, &radii, Ix1(nb))?)?;
+    out.set_item(intern!(py, "rms"), fit::frozen(py, &rms, Ix1(nb))?)?;
+    out.set_item(
+        intern!(py, "converged"),
+        fit::frozen(py, &converged, Ix1(nb))?,
+    )?;
+    out.set_item(
+        intern!(py, "iterations"),
+        fit::frozen(py, &iterations, Ix1(nb))?,
+    )?;
+    out.set_item(intern!(py, "errors"), errors)?;
+    out.set_item(intern!(py, "error_kinds"), kinds)?;
     Ok(out)
 }
 

@@ -399,12 +399,16 @@ def fit_batch(
     """
     opts = _options(model, radius, max_iter, tol, method, debias)
     fix, _ = _fixed_vector(fixed, model, opts[1])
+    bounds: np.ndarray | int
     if isinstance(sets, np.ndarray) and sets.ndim == 3:
         if sets.shape[2] != 3:
             raise CalibrationError(f"sets must have shape (B, N, 3), got {sets.shape}")
         b, n = sets.shape[0], sets.shape[1]
-        flat = as_points(sets.reshape(b * n, 3), name="sets")
-        bounds = np.arange(b + 1, dtype=np.int64) * n
+        flat = sets.reshape(b * n, 3)
+        if not _ready(flat):
+            flat = as_points(flat, name="sets")
+        # sets of n points each: the core splits the rows itself
+        bounds = n if n > 0 else np.zeros(b + 1, dtype=np.int64)
     else:
         if isinstance(sets, np.ndarray) and sets.ndim != 1:
             raise CalibrationError(
@@ -415,9 +419,7 @@ def fit_batch(
         bounds = np.zeros(len(parts) + 1, dtype=np.int64)
         bounds[1:] = np.cumsum([len(p) for p in parts])
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
-    d = _core_fit_batch(flat, bounds, *opts, fix)
-    for k in ("offsets", "matrices", "radii", "rms", "converged", "iterations"):
-        d[k].setflags(write=False)
+    d = _core_fit_batch(flat, bounds, *opts, fix)  # its arrays come read-only
     return BatchFit(
         model=model,
         offsets=d["offsets"],
