@@ -23,6 +23,9 @@ use super::{AllanResult, Cluster, BATCH, LANES};
 /// Rows of a push from which the axes run on several threads.
 const PARALLEL_ROWS: usize = 4096;
 
+/// Batches an axis processes per task (see [`Octave::push`]).
+const GROUP: usize = 4;
+
 /// One level of one axis.
 #[derive(Debug, Clone, Default)]
 struct Level {
@@ -100,8 +103,10 @@ impl Octave {
         let want = &self.want;
         let mut start = 0;
         while start < rows {
-            let b = BATCH.min(rows - start);
-            if let Some(i) = super::first_non_finite(&samples[start * nax..(start + b) * nax]) {
+            // a group of batches per task: fewer wake-ups of the thread pool, while the
+            // group's rows still fit in the shared cache for the other axes
+            let g = (GROUP * BATCH).min(rows - start);
+            if let Some(i) = super::first_non_finite(&samples[start * nax..(start + g) * nax]) {
                 for (ax, (r, levels)) in self.axes.iter_mut().zip(saved) {
                     ax.reference = r;
                     ax.levels = levels;
@@ -109,7 +114,12 @@ impl Octave {
                 return Some(start * nax + i);
             }
             let run = |(a, ax): (usize, &mut Axis)| {
-                push_batch(ax, want, &samples[start * nax + a..], nax, b)
+                let mut s = start;
+                while s < start + g {
+                    let b = BATCH.min(start + g - s);
+                    push_batch(ax, want, &samples[s * nax + a..], nax, b);
+                    s += b;
+                }
             };
             if parallel {
                 use rayon::prelude::*;
@@ -117,7 +127,7 @@ impl Octave {
             } else {
                 self.axes.iter_mut().enumerate().for_each(run);
             }
-            start += b;
+            start += g;
         }
         None
     }
