@@ -207,12 +207,8 @@ impl<S: Simd, const P: usize> Lanes<S, P> {
 }
 
 /// Groups of [`LANES`] points whose Jacobian rows are computed before they are summed into
-/// `JᵀJ`, so that each row of `JᵀJ` is summed with its accumulators in registers. (16 rather
-/// than 8: the rows go through the stack either way, and each block ends by adding its 45
-/// `JᵀJ` partial sums into memory, half as often; callgrind: 6 % fewer instructions a pass.)
-const BLOCK: usize = 16;
-// `run` spells out the groups of a block: one of 16
-const _: () = assert!(BLOCK == 16);
+/// `JᵀJ`, so that each row of `JᵀJ` is summed with its accumulators in registers.
+const BLOCK: usize = 8;
 
 /// One group's Jacobian rows (one vector per parameter), plain residual and noise direction.
 struct Rows<S: Simd, const P: usize> {
@@ -383,36 +379,25 @@ fn run<S: Simd, const P: usize, const JTJ: bool, const DEB: bool, const COV: boo
     let mut acc = Lanes::<S, P>::zero(s);
     let mut jtj = [s.zero(); PACKED];
     let (groups, rest) = points.as_chunks::<LANES>();
-    // blocks of BLOCK groups, then the groups left over in blocks of 8, 4, 2 and 1
-    macro_rules! block {
-        ($b:expr, $n:literal, [$($g:literal),+]) => {{
-            let b = $b;
-            let rows = [$(group::<S, P, DEB, COV>(s, &k, s.load_xyz(&b[$g]), None, &mut acc)),+];
-            sum_block::<S, P, $n, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
-        }};
-    }
     let (blocks, tail) = groups.as_chunks::<BLOCK>();
     for b in blocks {
-        block!(
-            b,
-            16,
-            [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]
-        );
-    }
-    let (b8, tail) = tail.as_chunks::<8>();
-    for b in b8 {
-        block!(b, 8, [0, 1, 2, 3, 4, 5, 6, 7]);
-    }
-    let (b4, tail) = tail.as_chunks::<4>();
-    for b in b4 {
-        block!(b, 4, [0, 1, 2, 3]);
-    }
-    let (b2, tail) = tail.as_chunks::<2>();
-    for b in b2 {
-        block!(b, 2, [0, 1]);
+        macro_rules! g {
+            ($g:literal) => {
+                group::<S, P, DEB, COV>(s, &k, s.load_xyz(&b[$g]), None, &mut acc)
+            };
+        }
+        let rows = [g!(0), g!(1), g!(2), g!(3), g!(4), g!(5), g!(6), g!(7)];
+        sum_block::<S, P, BLOCK, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
     }
     for grp in tail {
-        block!(std::slice::from_ref(grp), 1, [0]);
+        let rows = [group::<S, P, DEB, COV>(
+            s,
+            &k,
+            s.load_xyz(grp),
+            None,
+            &mut acc,
+        )];
+        sum_block::<S, P, 1, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
     }
     if !rest.is_empty() {
         let mut wt = [0.0; LANES];
