@@ -593,11 +593,7 @@ impl Allan {
         for (k, &ci) in task_cluster.iter().enumerate() {
             for (a, ax) in axes.iter_mut().enumerate() {
                 let s: f64 = (0..PARTS).map(|p| sums[a * PARTS + p][k]).sum();
-                // Kahan: the total over a whole log keeps full precision (true sum = sum - comp)
-                let yv = s - ax.comp[ci];
-                let t = ax.sum[ci] + yv;
-                ax.comp[ci] = (t - ax.sum[ci]) - yv;
-                ax.sum[ci] = t;
+                kahan_add(&mut ax.sum[ci], &mut ax.comp[ci], s);
             }
         }
     }
@@ -616,16 +612,10 @@ impl Allan {
         }
         let adev = (0..nc)
             .map(|ci| {
-                let m = self.clusters[ci].m as f64;
+                let m = self.clusters[ci].m;
                 self.axes
                     .iter()
-                    .map(|ax| {
-                        if terms[ci] == 0 {
-                            f64::NAN
-                        } else {
-                            ((ax.sum[ci] - ax.comp[ci]) / (2.0 * terms[ci] as f64)).sqrt() / m
-                        }
-                    })
+                    .map(|ax| deviation(ax.sum[ci], ax.comp[ci], terms[ci], m))
                     .collect()
             })
             .collect();
@@ -640,6 +630,26 @@ impl Allan {
             terms,
             n: self.n,
         }
+    }
+}
+
+/// Adds `s` to a Kahan sum (`sum`, and `comp` its compensation), so that the total over a
+/// whole log keeps full precision (true sum = sum - comp).
+#[inline(always)]
+fn kahan_add(sum: &mut f64, comp: &mut f64, s: f64) {
+    let yv = s - *comp;
+    let t = *sum + yv;
+    *comp = (t - *sum) - yv;
+    *sum = t;
+}
+
+/// The deviation of a cluster of `m` samples from its Kahan sum of squared terms (NaN without
+/// a term).
+fn deviation(sum: f64, comp: f64, terms: u64, m: u64) -> f64 {
+    if terms == 0 {
+        f64::NAN
+    } else {
+        ((sum - comp) / (2.0 * terms as f64)).sqrt() / m as f64
     }
 }
 

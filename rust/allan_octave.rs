@@ -146,12 +146,8 @@ impl Octave {
                 self.axes
                     .iter()
                     .map(|ax| {
-                        if terms[ci] == 0 {
-                            f64::NAN
-                        } else {
-                            let l = &ax.levels[level];
-                            ((l.sum - l.comp) / (2.0 * terms[ci] as f64)).sqrt() / c.m as f64
-                        }
+                        let l = &ax.levels[level];
+                        super::deviation(l.sum, l.comp, terms[ci], c.m)
                     })
                     .collect()
             })
@@ -228,14 +224,10 @@ fn push_batch_impl(ax: &mut Axis, want: &[Option<usize>], col: &[f64], nax: usiz
     }
 }
 
-/// Adds a batch's sum of squares to a level's total: Kahan, so that the total over a whole
-/// log keeps full precision (true sum = sum - comp).
+/// Adds a batch's sum of squares to a level's total.
 #[inline(always)]
 fn kahan(level: &mut Level, s: f64) {
-    let yv = s - level.comp;
-    let t = level.sum + yv;
-    level.comp = (t - level.sum) - yv;
-    level.sum = t;
+    super::kahan_add(&mut level.sum, &mut level.comp, s);
 }
 
 /// `y - r` of each reading `col[i nax]`.
