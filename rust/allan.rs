@@ -416,7 +416,7 @@ impl Allan {
         let bad = if let Some(o) = &mut self.octave {
             // checks each batch as it goes (while it is in cache) and undoes the push on a
             // non-finite value
-            o.push(samples, rows, self.parallel)
+            o.push(samples, rows, self.parallel, self.n)
         } else {
             first_non_finite(samples)
         };
@@ -654,13 +654,30 @@ fn deviation(sum: f64, comp: f64, terms: u64, m: u64) -> f64 {
 }
 
 /// The index of the first NaN or infinite value, if any. The common case, all finite, is one
-/// vectorised pass: `v * 0` is 0 for a finite `v` and NaN otherwise.
+/// vectorised pass: `v * 0` is 0 for a finite `v` and NaN otherwise (AVX2 where the CPU has
+/// it: the samples are read once per push, and this pass is a tenth of a non-overlapping
+/// deviation's work).
 fn first_non_finite(samples: &[f64]) -> Option<usize> {
-    let mut acc = [0.0f64; LANES];
-    let chunks = samples.chunks_exact(LANES);
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::has_avx2_fma() {
+        return crate::simd::avx2_call!(first_non_finite_avx2(samples));
+    }
+    first_non_finite_impl(samples)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn first_non_finite_avx2(samples: &[f64]) -> Option<usize> {
+    first_non_finite_impl(samples)
+}
+
+#[inline(always)]
+fn first_non_finite_impl(samples: &[f64]) -> Option<usize> {
+    let mut acc = [0.0f64; 2 * LANES];
+    let chunks = samples.chunks_exact(2 * LANES);
     let tail = chunks.remainder();
     for c in chunks {
-        for j in 0..LANES {
+        for j in 0..2 * LANES {
             acc[j] += c[j] * 0.0;
         }
     }

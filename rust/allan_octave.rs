@@ -23,12 +23,17 @@ use super::{AllanResult, Cluster, BATCH, LANES};
 /// Rows of a push from which the axes run on several threads.
 const PARALLEL_ROWS: usize = 4096;
 
-/// Batches an axis processes per task (see [`Octave::push`]).
+/// Batches an axis processes per task (see [`Octave::push_rows`]).
 const GROUP: usize = 4;
+
+/// The fewest rows in a piece (see [`Octave::push`]).
+const MIN_PIECE: usize = 1 << 16;
 
 /// One level of one axis.
 #[derive(Debug, Clone, Default)]
 struct Level {
+    /// The first block seen (hi, lo): where a piece joins the blocks before it.
+    first: Option<(f64, f64)>,
     /// The last block seen (hi, lo): the next block's difference starts from it.
     prev: Option<(f64, f64)>,
     /// A block waiting for its pair (the next level's block is their sum).
@@ -38,14 +43,33 @@ struct Level {
     comp: f64,
 }
 
+/// Ping-pong buffers of one batch's blocks: (hi, lo) of the level read, of the level made.
+#[derive(Debug, Clone)]
+struct Scratch {
+    a: (Vec<f64>, Vec<f64>),
+    b: (Vec<f64>, Vec<f64>),
+}
+
+impl Scratch {
+    fn new() -> Scratch {
+        Scratch {
+            a: (vec![0.0; BATCH], vec![0.0; BATCH]),
+            b: (vec![0.0; BATCH], vec![0.0; BATCH]),
+        }
+    }
+}
+
+thread_local! {
+    /// The scratch of the pieces a thread runs (one batch, 512 KiB, kept for the thread's life).
+    static PIECE_SCRATCH: std::cell::RefCell<Option<Scratch>> = const { std::cell::RefCell::new(None) };
+}
+
 /// Everything about one axis.
 #[derive(Debug, Clone)]
 struct Axis {
     reference: f64,
     levels: Vec<Level>,
-    /// Ping-pong buffers of one batch's blocks: (hi, lo) of the level read, of the level made.
-    a: (Vec<f64>, Vec<f64>),
-    b: (Vec<f64>, Vec<f64>),
+    scratch: Scratch,
 }
 
 /// The pyramid accumulator of every axis.
@@ -74,8 +98,7 @@ impl Octave {
         let axis = Axis {
             reference: f64::NAN,
             levels: vec![Level::default(); top + 1],
-            a: (vec![0.0; BATCH], vec![0.0; BATCH]),
-            b: (vec![0.0; BATCH], vec![0.0; BATCH]),
+            scratch: Scratch::new(),
         };
         Some(Octave {
             want,
@@ -83,23 +106,65 @@ impl Octave {
         })
     }
 
-    /// Bytes held (fixed at construction).
+    /// Bytes held (fixed at construction; a thread that runs pieces keeps one more batch of
+    /// scratch, 512 KiB).
     pub(super) fn memory_bytes(&self) -> usize {
         let per_axis = 4 * 8 * BATCH + self.want.len() * std::mem::size_of::<Level>();
         per_axis * self.axes.len()
     }
 
-    /// Adds `rows` rows of `samples` (row-major), a batch at a time (its rows stay in cache
-    /// while every axis reads them), the axes of a batch in parallel. Returns the index of
-    /// the first NaN or infinite value, if any, having then added nothing.
-    pub(super) fn push(&mut self, samples: &[f64], rows: usize, parallel: bool) -> Option<usize> {
-        let nax = self.axes.len();
-        let parallel = parallel && nax > 1 && rows >= PARALLEL_ROWS;
+    /// Rows per piece: a multiple of the largest cluster size, so that no block of any level
+    /// straddles two pieces.
+    fn piece_rows(&self) -> u64 {
+        (1u64 << (self.want.len() - 1)).max(MIN_PIECE as u64)
+    }
+
+    /// Adds `rows` rows of `samples` (row-major) to axes that have seen `n` rows. Returns the
+    /// index of the first NaN or infinite value, if any, having then added nothing.
+    ///
+    /// The rows up to the next multiple of [`Octave::piece_rows`] extend the pyramid in place
+    /// ([`Octave::push_rows`]). The rest is cut at the multiples into pieces, and each piece
+    /// of each axis starts a pyramid of its own, so that the pieces run on every core even
+    /// when there are fewer axes than cores. A piece starts and, but for the last, ends on a
+    /// boundary of every level's blocks, so it joins the pyramid before it by one difference
+    /// per level (its first block less the last block before it) and its sums; the pieces
+    /// are joined in order, whatever the number of threads, so the result does not depend
+    /// on it.
+    pub(super) fn push(
+        &mut self,
+        samples: &[f64],
+        rows: usize,
+        parallel: bool,
+        n: u64,
+    ) -> Option<usize> {
+        let piece = self.piece_rows();
+        let head = ((piece - n % piece) % piece).min(rows as u64) as usize;
         let saved: Vec<(f64, Vec<Level>)> = self
             .axes
             .iter()
             .map(|a| (a.reference, a.levels.clone()))
             .collect();
+        let bad = self.push_rows(samples, head, parallel).or_else(|| {
+            if head == rows {
+                return None;
+            }
+            self.push_pieces(samples, head, rows, piece as usize, parallel)
+        });
+        if bad.is_some() {
+            for (ax, (r, levels)) in self.axes.iter_mut().zip(saved) {
+                ax.reference = r;
+                ax.levels = levels;
+            }
+        }
+        bad
+    }
+
+    /// Extends each axis's pyramid by the first `rows` rows, a batch at a time (its rows stay
+    /// in cache while every axis reads them), the axes of a batch in parallel. Returns the
+    /// index of the first NaN or infinite value, if any (the caller undoes the push).
+    fn push_rows(&mut self, samples: &[f64], rows: usize, parallel: bool) -> Option<usize> {
+        let nax = self.axes.len();
+        let parallel = parallel && nax > 1 && rows >= PARALLEL_ROWS;
         let want = &self.want;
         let mut start = 0;
         while start < rows {
@@ -107,17 +172,15 @@ impl Octave {
             // group's rows still fit in the shared cache for the other axes
             let g = (GROUP * BATCH).min(rows - start);
             if let Some(i) = super::first_non_finite(&samples[start * nax..(start + g) * nax]) {
-                for (ax, (r, levels)) in self.axes.iter_mut().zip(saved) {
-                    ax.reference = r;
-                    ax.levels = levels;
-                }
                 return Some(start * nax + i);
             }
             let run = |(a, ax): (usize, &mut Axis)| {
                 let mut s = start;
                 while s < start + g {
                     let b = BATCH.min(start + g - s);
-                    push_batch(ax, want, &samples[s * nax + a..], nax, b);
+                    let col = &samples[s * nax + a..];
+                    let (r, levels) = (&mut ax.reference, &mut ax.levels);
+                    push_batch(r, levels, &mut ax.scratch, want, col, nax, b);
                     s += b;
                 }
             };
@@ -128,6 +191,71 @@ impl Octave {
                 self.axes.iter_mut().enumerate().for_each(run);
             }
             start += g;
+        }
+        None
+    }
+
+    /// Rows `from..rows` (`from` on a piece boundary): a fresh pyramid per piece and axis,
+    /// then each joined to its axis's, in order. Returns the index of the first NaN or
+    /// infinite value, if any, having then joined nothing.
+    fn push_pieces(
+        &mut self,
+        samples: &[f64],
+        from: usize,
+        rows: usize,
+        piece: usize,
+        parallel: bool,
+    ) -> Option<usize> {
+        let nax = self.axes.len();
+        for (a, ax) in self.axes.iter_mut().enumerate() {
+            if ax.reference.is_nan() {
+                ax.reference = samples[from * nax + a];
+            }
+        }
+        let starts: Vec<usize> = (from..rows).step_by(piece).collect();
+        let (want, axes) = (&self.want, &self.axes);
+        // a piece's axes take turns on each group of its batches, while the group's rows are
+        // in this core's cache
+        let run = |&s: &usize| -> Result<Vec<Vec<Level>>, usize> {
+            PIECE_SCRATCH.with(|cell| {
+                let mut cell = cell.borrow_mut();
+                let scratch = cell.get_or_insert_with(Scratch::new);
+                let mut refs: Vec<f64> = axes.iter().map(|a| a.reference).collect();
+                let mut levels = vec![vec![Level::default(); want.len()]; nax];
+                let end = (s + piece).min(rows);
+                let mut at = s;
+                while at < end {
+                    let g = (GROUP * BATCH).min(end - at);
+                    if let Some(i) = super::first_non_finite(&samples[at * nax..(at + g) * nax]) {
+                        return Err(at * nax + i);
+                    }
+                    for (a, (r, lv)) in refs.iter_mut().zip(levels.iter_mut()).enumerate() {
+                        let mut q = at;
+                        while q < at + g {
+                            let b = BATCH.min(at + g - q);
+                            push_batch(r, lv, scratch, want, &samples[q * nax + a..], nax, b);
+                            q += b;
+                        }
+                    }
+                    at += g;
+                }
+                Ok(levels)
+            })
+        };
+        let done: Vec<Result<Vec<Vec<Level>>, usize>> =
+            if parallel && starts.len() > 1 && rows - from >= PARALLEL_ROWS {
+                use rayon::prelude::*;
+                starts.par_iter().map(run).collect()
+            } else {
+                starts.iter().map(run).collect()
+            };
+        if let Some(&i) = done.iter().filter_map(|d| d.as_ref().err()).min() {
+            return Some(i);
+        }
+        for d in done.into_iter().flatten() {
+            for (ax, levels) in self.axes.iter_mut().zip(d) {
+                join(&mut ax.levels, levels, &self.want);
+            }
         }
         None
     }
@@ -162,51 +290,130 @@ impl Octave {
     }
 }
 
+/// Joins the pyramid of a piece (`piece`, started fresh on a boundary of every level's
+/// blocks) to the pyramid of the rows before it (`run`, which ends on that boundary).
+fn join(run: &mut [Level], piece: Vec<Level>, want: &[Option<usize>]) {
+    for (j, (r, p)) in run.iter_mut().zip(piece).enumerate() {
+        let Some((fh, fl)) = p.first else {
+            // the piece is too short to make a block of this level, or of any above it
+            break;
+        };
+        debug_assert!(r.pend.is_none());
+        if want[j].is_some() {
+            let joint = r.prev.map_or(0.0, |(ph, pl)| {
+                let d = (fh - ph) + (fl - pl);
+                d * d
+            });
+            kahan(r, (p.sum - p.comp) + joint);
+        }
+        r.first = r.first.or(p.first);
+        r.prev = p.prev;
+        r.pend = p.pend;
+    }
+}
+
 /// One batch of `b` rows of one axis: its readings `col[0], col[nax], ...` become level 0,
 /// then each level adds its differences and pairs its blocks into the next (dispatches to
 /// the AVX2 build where the CPU has it).
-fn push_batch(ax: &mut Axis, want: &[Option<usize>], col: &[f64], nax: usize, b: usize) {
+#[allow(clippy::too_many_arguments)]
+fn push_batch(
+    reference: &mut f64,
+    levels: &mut [Level],
+    scratch: &mut Scratch,
+    want: &[Option<usize>],
+    col: &[f64],
+    nax: usize,
+    b: usize,
+) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::has_avx2_fma() {
-        return crate::simd::avx2_call!(push_batch_avx2(ax, want, col, nax, b));
+        return crate::simd::avx2_call!(push_batch_avx2(
+            reference, levels, scratch, want, col, nax, b
+        ));
     }
-    push_batch_impl(ax, want, col, nax, b)
+    push_batch_impl(reference, levels, scratch, want, col, nax, b)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn push_batch_avx2(ax: &mut Axis, want: &[Option<usize>], col: &[f64], nax: usize, b: usize) {
-    push_batch_impl(ax, want, col, nax, b)
+#[allow(clippy::too_many_arguments)]
+fn push_batch_avx2(
+    reference: &mut f64,
+    levels: &mut [Level],
+    scratch: &mut Scratch,
+    want: &[Option<usize>],
+    col: &[f64],
+    nax: usize,
+    b: usize,
+) {
+    push_batch_impl(reference, levels, scratch, want, col, nax, b)
 }
 
 #[inline(always)]
-fn push_batch_impl(ax: &mut Axis, want: &[Option<usize>], col: &[f64], nax: usize, b: usize) {
-    if ax.reference.is_nan() {
-        ax.reference = col[0];
+#[allow(clippy::too_many_arguments)]
+fn push_batch_impl(
+    reference: &mut f64,
+    levels: &mut [Level],
+    scratch: &mut Scratch,
+    want: &[Option<usize>],
+    col: &[f64],
+    nax: usize,
+    b: usize,
+) {
+    if reference.is_nan() {
+        *reference = col[0];
     }
-    let Axis {
-        reference,
-        levels,
-        a,
-        b: other,
-    } = ax;
+    let Scratch { a, b: other } = scratch;
     let (mut src, mut dst) = (a, other);
     // level 0: the readings less the reference (rounded once, as the phases of the general
-    // path are); its blocks have no error part, so it is differenced and paired on its own
-    let h0 = &mut dst.0[..b];
-    readings(col, nax, *reference, h0);
+    // path are); its blocks have no error part, so it is differenced and paired on its own.
+    // The readings are split into the even and odd members of this batch's pairs (after the
+    // one that completes a pair left by the last batch), so that the pairs and differences
+    // are read from two contiguous runs
     let level = &mut levels[0];
+    let carried = level.pend.take();
+    let i = usize::from(carried.is_some());
+    let p = (b - i) / 2;
+    let (even, odd) = dst.0.split_at_mut(BATCH / 2);
+    let (even, odd) = (&mut even[..p], &mut odd[..p]);
+    readings_split(&col[i * nax..], nax, *reference, even, odd);
+    let first = col[0] - *reference;
+    let last = col[(b - 1) * nax] - *reference;
     if want[0].is_some() {
-        let first = level
+        let mut s = level
             .prev
-            .map_or(0.0, |(ph, _)| (h0[0] - ph) * (h0[0] - ph));
-        kahan(level, first + diffs0(h0));
+            .map_or(0.0, |(ph, _)| (first - ph) * (first - ph));
+        if p == 0 {
+            if b == 2 {
+                s += (last - first) * (last - first);
+            }
+        } else {
+            if i == 1 {
+                s += (even[0] - first) * (even[0] - first);
+            }
+            if i + 2 * p < b {
+                s += (last - odd[p - 1]) * (last - odd[p - 1]);
+            }
+        }
+        kahan(level, s + diffs_split(even, odd));
     }
-    level.prev = Some((h0[b - 1], 0.0));
+    level.first = level.first.or(Some((first, 0.0)));
+    level.prev = Some((last, 0.0));
     if want.len() == 1 {
         return;
     }
-    let mut n = pairs0(&mut level.pend, h0, &mut src.0, &mut src.1);
+    let mut n = 0;
+    if let Some((ph, _)) = carried {
+        (src.0[0], src.1[0]) = two_sum(ph, first);
+        n = 1;
+    }
+    for (q, (e, o)) in even.iter().zip(odd.iter()).enumerate() {
+        (src.0[n + q], src.1[n + q]) = two_sum(*e, *o);
+    }
+    n += p;
+    if i + 2 * p < b {
+        level.pend = Some((last, 0.0));
+    }
     for (j, level) in levels.iter_mut().enumerate().skip(1) {
         if n == 0 {
             break;
@@ -215,6 +422,7 @@ fn push_batch_impl(ax: &mut Axis, want: &[Option<usize>], col: &[f64], nax: usiz
         if want[j].is_some() {
             kahan(level, squares(level.prev, h, l));
         }
+        level.first = level.first.or(Some((h[0], l[0])));
         level.prev = Some((h[n - 1], l[n - 1]));
         if j + 1 == want.len() {
             break;
@@ -230,82 +438,74 @@ fn kahan(level: &mut Level, s: f64) {
     super::kahan_add(&mut level.sum, &mut level.comp, s);
 }
 
-/// `y - r` of each reading `col[i nax]`.
+/// `y - r` of the readings `col[2 q nax]` (into `even`) and `col[(2 q + 1) nax]` (into
+/// `odd`).
 #[inline(always)]
-fn readings(col: &[f64], nax: usize, r: f64, h: &mut [f64]) {
-    let n = h.len();
+fn readings_split(col: &[f64], nax: usize, r: f64, even: &mut [f64], odd: &mut [f64]) {
     match nax {
-        1 => readings_of::<1>(col, r, h),
-        2 => readings_of::<2>(col, r, h),
-        3 => readings_of::<3>(col, r, h),
+        1 => split_of::<1>(col, r, even, odd),
+        2 => split_of::<2>(col, r, even, odd),
+        3 => split_of::<3>(col, r, even, odd),
         _ => {
-            for (i, y) in h
-                .iter_mut()
-                .zip(col[..(n - 1) * nax + 1].iter().step_by(nax))
-            {
-                *i = *y - r;
+            for (q, (e, o)) in even.iter_mut().zip(odd.iter_mut()).enumerate() {
+                *e = col[2 * q * nax] - r;
+                *o = col[(2 * q + 1) * nax] - r;
             }
         }
     }
 }
 
 #[inline(always)]
-fn readings_of<const K: usize>(col: &[f64], r: f64, h: &mut [f64]) {
-    let n = h.len();
-    let (last, body) = h.split_last_mut().expect("a batch has rows");
-    for (i, y) in body.iter_mut().zip(col[..(n - 1) * K].chunks_exact(K)) {
-        *i = y[0] - r;
+fn split_of<const K: usize>(col: &[f64], r: f64, even: &mut [f64], odd: &mut [f64]) {
+    let p = even.len();
+    if p == 0 {
+        return;
     }
-    *last = col[(n - 1) * K] - r;
+    // the last pair's second reading may end the slice: it is read on its own
+    for ((e, o), y) in even[..p - 1]
+        .iter_mut()
+        .zip(odd[..p - 1].iter_mut())
+        .zip(col[..2 * (p - 1) * K].chunks_exact(2 * K))
+    {
+        *e = y[0] - r;
+        *o = y[K] - r;
+    }
+    even[p - 1] = col[2 * (p - 1) * K] - r;
+    odd[p - 1] = col[(2 * p - 1) * K] - r;
 }
 
-/// Σ (h_i - h_{i-1})² for i ≥ 1 (level 0, no error parts).
+/// Σ (o_q - e_q)² + Σ (e_{q+1} - o_q)²: the differences of consecutive readings, split into
+/// the even and odd members of their pairs (level 0, no error parts).
 #[inline(always)]
-fn diffs0(h: &[f64]) -> f64 {
-    let n = h.len();
-    if n < 2 {
+fn diffs_split(even: &[f64], odd: &[f64]) -> f64 {
+    let p = even.len().min(odd.len());
+    if p == 0 {
         return 0.0;
     }
-    let (h1, h0) = (&h[1..n], &h[..n - 1]);
-    let m = n - 1;
+    let m = p - 1;
     let full = m / LANES * LANES;
     let mut acc = [0.0f64; LANES];
-    for (a1, a0) in h1[..full]
+    for ((e, e1), o) in even[..full]
         .chunks_exact(LANES)
-        .zip(h0[..full].chunks_exact(LANES))
+        .zip(even[1..=full].chunks_exact(LANES))
+        .zip(odd[..full].chunks_exact(LANES))
     {
         for j in 0..LANES {
-            let d = a1[j] - a0[j];
+            let d = o[j] - e[j];
+            let d1 = e1[j] - o[j];
             acc[j] += d * d;
+            acc[j] += d1 * d1;
         }
     }
     let mut tail = 0.0;
-    for i in full..m {
-        let d = h1[i] - h0[i];
+    for q in full..m {
+        let d = odd[q] - even[q];
+        let d1 = even[q + 1] - odd[q];
         tail += d * d;
+        tail += d1 * d1;
     }
-    acc.iter().sum::<f64>() + tail
-}
-
-/// [`pairs`] for level 0 (blocks without error parts): each pair's exact sum.
-#[inline(always)]
-fn pairs0(pend: &mut Option<(f64, f64)>, h: &[f64], oh: &mut [f64], ol: &mut [f64]) -> usize {
-    let n = h.len();
-    let (mut i, mut k) = (0, 0);
-    if let Some((ph, _)) = pend.take() {
-        (oh[0], ol[0]) = two_sum(ph, h[0]);
-        (i, k) = (1, 1);
-    }
-    let p = (n - i) / 2;
-    let hs = &h[i..i + 2 * p];
-    let (oh, ol) = (&mut oh[k..k + p], &mut ol[k..k + p]);
-    for q in 0..p {
-        (oh[q], ol[q]) = two_sum(hs[2 * q], hs[2 * q + 1]);
-    }
-    if i + 2 * p < n {
-        *pend = Some((h[n - 1], 0.0));
-    }
-    k + p
+    let d = odd[m] - even[m];
+    acc.iter().sum::<f64>() + tail + d * d
 }
 
 /// `a + b` as the rounded sum and its exact error (Knuth's TwoSum).

@@ -267,3 +267,69 @@ fn the_pyramid_matches_the_general_path_on_three_axes_in_parallel() {
     );
     assert_eq!(format!("{:?}", few.result()), format!("{r:?}"));
 }
+
+#[test]
+fn pieces_join_to_the_general_path_whatever_the_threads_and_the_chunks() {
+    // 5 pieces of 2^16 rows and a short one; pushes that start and end off the boundaries
+    let n = 5 * (1 << 16) + 9001;
+    let rows: Vec<f64> = lcg(3 * n, 7)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| 1e6 * (1 + i % 3) as f64 + v + (i / 3) as f64 * 1e-3)
+        .collect();
+    let ms: Vec<u64> = (0..15).map(|k| 1u64 << k).collect();
+    let mut general = Allan::non_overlapping_with(50.0, 3, &ms, false).unwrap();
+    general.push(&rows).unwrap();
+    let want = general.result();
+    let mut seen: Option<AllanResult> = None;
+    for cuts in [
+        vec![n],
+        vec![1, 70_000, n],
+        vec![65_535, 65_537, 200_000, n],
+    ] {
+        for parallel in [false, true] {
+            let mut acc = Allan::non_overlapping(50.0, 3, &ms).unwrap();
+            acc.set_parallel(parallel);
+            let mut from = 0;
+            for &to in &cuts {
+                acc.push(&rows[3 * from..3 * to]).unwrap();
+                from = to;
+            }
+            let r = acc.result();
+            assert_eq!(r.terms, want.terms);
+            for (ci, dev) in r.adev.iter().enumerate() {
+                for k in 0..3 {
+                    let w = want.adev[ci][k];
+                    assert!(
+                        (dev[k] - w).abs() <= 1e-13 * w,
+                        "cuts {cuts:?} m {} axis {k}: {} vs {w}",
+                        ms[ci],
+                        dev[k]
+                    );
+                }
+            }
+            if cuts.len() == 1 {
+                // the same pieces joined in the same order, on one thread or two
+                match &seen {
+                    None => seen = Some(r),
+                    Some(s) => assert_eq!(format!("{s:?}"), format!("{r:?}")),
+                }
+            }
+        }
+    }
+    // a non-finite value in a later piece adds nothing, and is named by its row
+    let mut acc = Allan::non_overlapping(50.0, 3, &ms).unwrap();
+    acc.push(&rows[..3 * 1000]).unwrap();
+    let before = format!("{:?}", acc.result());
+    let mut bad = rows[3 * 1000..].to_vec();
+    let row = 3 * (1 << 16) + 17;
+    bad[3 * row + 2] = f64::NEG_INFINITY;
+    bad[3 * (row + 5)] = f64::NAN;
+    let e = acc.push(&bad).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains(&format!("row {} of the whole stream, axis 2", 1000 + row)),
+        "{e}"
+    );
+    assert_eq!(format!("{:?}", acc.result()), before);
+}
