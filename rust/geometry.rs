@@ -54,7 +54,9 @@ pub fn scan(points: &[[f64; 3]], parallel: bool) -> Result<Scan> {
     let p0 = points.first().copied().unwrap_or([0.0; 3]);
     let part = |c: &[[f64; 3]]| scan_part(c, p0);
     let (s1, s2, max_abs, probe) = if parallel && points.len() > 4 * SCAN_CHUNK {
-        points.par_chunks(SCAN_CHUNK).map(part).reduce(
+        let parts = points.par_chunks(SCAN_CHUNK).map(part).collect();
+        crate::kernel::in_order(
+            parts,
             || ([0.0; 3], [0.0; 6], 0.0, 0.0),
             |a, b| {
                 let mut s1 = a.0;

@@ -34,6 +34,32 @@ pub(crate) const CHUNK: usize = 4096;
 /// the pool exceeds the gain.
 pub(crate) const PARALLEL_ABOVE: usize = 3 * CHUNK;
 
+/// Adds per-chunk results `parts` (in the order of their chunks) in an order fixed whatever
+/// the number of threads that computed them: halves, quarters and eighths of the chunks, each
+/// eighth summed left to right from zero, then pairwise back up. That is the tree rayon's
+/// `reduce` (and `sum`) takes on a pool of one thread called from outside it, so results are
+/// those of a one-thread pool; on more threads its tree follows the work stealing, and float
+/// sums differed in the last bits from one run of the same fit to the next.
+pub(crate) fn in_order<T>(parts: Vec<T>, zero: impl Fn() -> T, add: impl Fn(T, T) -> T) -> T {
+    fn tree<T>(
+        parts: &mut std::vec::IntoIter<T>,
+        len: usize,
+        depth: u32,
+        zero: &impl Fn() -> T,
+        add: &impl Fn(T, T) -> T,
+    ) -> T {
+        if depth == 0 || len < 2 {
+            return parts.by_ref().take(len).fold(zero(), add);
+        }
+        let mid = len / 2;
+        let left = tree(parts, mid, depth - 1, zero, add);
+        let right = tree(parts, len - mid, depth - 1, zero, add);
+        add(left, right)
+    }
+    let len = parts.len();
+    tree(&mut parts.into_iter(), len, 3, &zero, &add)
+}
+
 /// The fixed inputs of one pass.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Setup {
@@ -49,7 +75,8 @@ pub(crate) struct Setup {
     pub trw2: f64,
 }
 
-/// What a pass sums.
+/// What a pass sums. A pass that wants the coverage and neither `JᵀJ` nor the noise sums is a
+/// coverage-only pass: its `Jᵀr₀`, `Σ r₀²` and `Σ ûᵀW²û` stay zero.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub(crate) struct Want {
     /// `JᵀJ` (the expensive part: `P(P+1)/2` multiply-adds per point).
@@ -218,8 +245,8 @@ struct Rows<S: Simd, const P: usize> {
 }
 
 /// One group of [`LANES`] points (`x`: their x, y, z; `wt`: 1 for a point, 0 for padding, or
-/// `None` for a full group): its Jacobian rows, `r₀` and `c`; adds its scalar sums (and
-/// coverage) to `acc`.
+/// `None` for a full group): its Jacobian rows, `r₀` and `c`; adds its scalar sums (unless
+/// `!scalars`: a coverage-only pass) and coverage to `acc`.
 #[inline(always)]
 fn group<S: Simd, const P: usize, const DEB: bool, const COV: bool>(
     s: S,
@@ -227,6 +254,7 @@ fn group<S: Simd, const P: usize, const DEB: bool, const COV: bool>(
     x: [S::V; 3],
     wt: Option<S::V>,
     acc: &mut Lanes<S, P>,
+    scalars: bool,
 ) -> Rows<S, P> {
     let w = &k.w;
     let u = arr3!(|i| s.fma(s.sub(x[i], k.mean[i]), k.inv_scale, k.neg_offset[i]));
@@ -261,8 +289,10 @@ fn group<S: Simd, const P: usize, const DEB: bool, const COV: bool>(
         }
     }
     let wq = s.fma(j[2], j[2], s.fma(j[1], j[1], s.mul(j[0], j[0])));
-    acc.wq = s.add(acc.wq, wq);
-    acc.r0r0 = s.fma(r0, r0, acc.r0r0);
+    if scalars {
+        acc.wq = s.add(acc.wq, wq);
+        acc.r0r0 = s.fma(r0, r0, acc.r0r0);
+    }
     let mut c = s.zero();
     if DEB {
         c = s.add(k.trw2, wq);
@@ -378,16 +408,22 @@ fn run<S: Simd, const P: usize, const JTJ: bool, const DEB: bool, const COV: boo
     };
     let mut acc = Lanes::<S, P>::zero(s);
     let mut jtj = [s.zero(); PACKED];
+    // a coverage-only pass (the one `finish` makes) computes `v / ‖v‖` and nothing of the
+    // Jacobian: the work left out (`W v`, the rows, `Jᵀr₀`) is about half of the pass, and
+    // the coverage sums are the same operations in the same order as in any other pass
+    let scalars = JTJ || DEB || !COV;
     let (groups, rest) = points.as_chunks::<LANES>();
     let (blocks, tail) = groups.as_chunks::<BLOCK>();
     for b in blocks {
         macro_rules! g {
             ($g:literal) => {
-                group::<S, P, DEB, COV>(s, &k, s.load_xyz(&b[$g]), None, &mut acc)
+                group::<S, P, DEB, COV>(s, &k, s.load_xyz(&b[$g]), None, &mut acc, scalars)
             };
         }
         let rows = [g!(0), g!(1), g!(2), g!(3), g!(4), g!(5), g!(6), g!(7)];
-        sum_block::<S, P, BLOCK, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
+        if scalars {
+            sum_block::<S, P, BLOCK, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
+        }
     }
     for grp in tail {
         let rows = [group::<S, P, DEB, COV>(
@@ -396,8 +432,11 @@ fn run<S: Simd, const P: usize, const JTJ: bool, const DEB: bool, const COV: boo
             s.load_xyz(grp),
             None,
             &mut acc,
+            scalars,
         )];
-        sum_block::<S, P, 1, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
+        if scalars {
+            sum_block::<S, P, 1, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
+        }
     }
     if !rest.is_empty() {
         let mut wt = [0.0; LANES];
@@ -411,8 +450,11 @@ fn run<S: Simd, const P: usize, const JTJ: bool, const DEB: bool, const COV: boo
             s.load_xyz(&grp),
             wt,
             &mut acc,
+            scalars,
         )];
-        sum_block::<S, P, 1, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
+        if scalars {
+            sum_block::<S, P, 1, JTJ, DEB>(s, &rows, &mut acc, &mut jtj);
+        }
     }
     acc.sum(
         s,
@@ -452,11 +494,135 @@ pub(crate) fn pass<const P: usize>(
     parallel: bool,
 ) -> Sums<P> {
     if parallel && points.len() > PARALLEL_ABOVE {
-        points
+        let parts = points
             .par_chunks(CHUNK)
             .map(|c| pass_serial::<P>(c, s, want))
-            .reduce(Sums::zero, Sums::add)
+            .collect();
+        in_order(parts, Sums::zero, Sums::add)
     } else {
         pass_serial::<P>(points, s, want)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cloud(n: usize) -> Vec<[f64; 3]> {
+        let mut x = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        (0..n)
+            .map(|_| {
+                let (a, b, c) = (next(), next(), next());
+                let r = (a * a + b * b + c * c).sqrt().max(1e-9);
+                [
+                    3.0 * a / r + 0.1,
+                    2.5 * b / r - 0.2,
+                    2.0 * c / r + 0.01 * next(),
+                ]
+            })
+            .collect()
+    }
+
+    fn setup() -> Setup {
+        let w = [[0.35, 0.01, -0.02], [0.01, 0.42, 0.03], [-0.02, 0.03, 0.5]];
+        let trw2 = (0..3)
+            .map(|i| (0..3).map(|k| w[i][k] * w[k][i]).sum::<f64>())
+            .sum();
+        Setup {
+            mean: [0.1, -0.2, 0.0],
+            inv_scale: 1.0,
+            offset: [0.01, 0.02, -0.03],
+            w,
+            trw2,
+        }
+    }
+
+    fn bits(a: &Sums<9>) -> Vec<u64> {
+        let mut v: Vec<f64> = a.jtj.iter().flatten().copied().collect();
+        v.extend(a.jtr0.iter().chain(&a.jtc).chain(&a.dd).chain(&a.faces));
+        v.extend([a.r0r0, a.r0c, a.cc, a.wq, a.count]);
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    #[test]
+    fn a_parallel_pass_sums_the_same_bits_on_any_number_of_threads() {
+        // 37 chunks: more than the eighths of `in_order`, an odd count, a short last chunk
+        let pts = cloud(36 * CHUNK + 123);
+        let want = Want {
+            jtj: true,
+            debias: true,
+            coverage: true,
+        };
+        let s = setup();
+        let outside = bits(&pass::<9>(&pts, &s, want, true));
+        for threads in [1, 2, 3, 5] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for _ in 0..5 {
+                let inside = pool.install(|| bits(&pass::<9>(&pts, &s, want, true)));
+                assert_eq!(inside, outside, "{threads} threads");
+            }
+        }
+    }
+
+    #[test]
+    fn in_order_sums_halves_quarters_and_eighths() {
+        // with values whose sums round differently in different orders
+        let parts: Vec<f64> = (0..11)
+            .map(|i| 1.0 + f64::EPSILON * (i as f64) * 0.75)
+            .collect();
+        let fold = |p: &[f64]| p.iter().fold(0.0, |a, b| a + b);
+        let eighths = [&parts[0..1], &parts[1..2], &parts[2..3], &parts[3..5]];
+        let rest = [&parts[5..6], &parts[6..8], &parts[8..9], &parts[9..11]];
+        let left = (fold(eighths[0]) + fold(eighths[1])) + (fold(eighths[2]) + fold(eighths[3]));
+        let right = (fold(rest[0]) + fold(rest[1])) + (fold(rest[2]) + fold(rest[3]));
+        let got = in_order(parts.clone(), || 0.0, |a, b| a + b);
+        assert_eq!(got.to_bits(), (left + right).to_bits());
+        assert_eq!(in_order(Vec::<f64>::new(), || 0.0, |a, b| a + b), 0.0);
+        assert_eq!(in_order(vec![2.5], || 0.0, |a, b| a + b), 2.5);
+    }
+
+    #[test]
+    fn a_coverage_only_pass_gives_the_coverage_of_a_full_pass() {
+        for n in [0, 3, 4, 31, 32, 33, 1000, 4099] {
+            let pts = cloud(n);
+            let s = setup();
+            let full = pass_serial::<9>(
+                &pts,
+                &s,
+                Want {
+                    jtj: true,
+                    debias: true,
+                    coverage: true,
+                },
+            );
+            let only = pass_serial::<9>(
+                &pts,
+                &s,
+                Want {
+                    jtj: false,
+                    debias: false,
+                    coverage: true,
+                },
+            );
+            let b = |a: &Sums<9>| {
+                a.dd.iter()
+                    .chain(&a.faces)
+                    .chain([&a.count])
+                    .map(|x| x.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(b(&only), b(&full), "{n} points");
+            assert_eq!(full.count, n as f64);
+            assert!(only.jtr0.iter().all(|&x| x == 0.0) && only.r0r0 == 0.0 && only.wq == 0.0);
+        }
     }
 }

@@ -22,7 +22,9 @@ pub(super) fn scatter<const M: usize>(
 ) -> SMatrix<f64, M, M> {
     let part = |c: &[[f64; 3]]| dispatch!(|simd| moments::<_, M>(simd, c, norm));
     let sums = if parallel && points.len() > crate::kernel::PARALLEL_ABOVE {
-        points.par_chunks(crate::kernel::CHUNK).map(part).reduce(
+        let parts = points.par_chunks(crate::kernel::CHUNK).map(part).collect();
+        crate::kernel::in_order(
+            parts,
             || [0.0; MOMENTS],
             |a, b| std::array::from_fn(|i| a[i] + b[i]),
         )

@@ -143,10 +143,11 @@ fn error_sum(points: &[[f64; 3]], c: [f64; 3], r2: f64) -> f64 {
     if points.len() < PARALLEL_FROM {
         error_sum_serial(points, c, r2)
     } else {
-        points
+        let parts = points
             .par_chunks(CHUNK)
             .map(|ch| error_sum_serial(ch, c, r2))
-            .sum()
+            .collect();
+        crate::kernel::in_order(parts, || 0.0, |a, b| a + b)
     }
 }
 

@@ -76,10 +76,8 @@ pub(super) fn neighbour_sums(points: &[[f64; 3]], c: [f64; 3], r2: f64, h: f64) 
     let sums = if points.len() < PARALLEL_FROM {
         part(points)
     } else {
-        points
-            .par_chunks(CHUNK)
-            .map(part)
-            .reduce(NeighbourSums::zero, NeighbourSums::add)
+        let parts = points.par_chunks(CHUNK).map(part).collect();
+        crate::kernel::in_order(parts, NeighbourSums::zero, NeighbourSums::add)
     };
     sums.totals(h2)
 }
