@@ -24,7 +24,7 @@ endif
 APT_PACKAGES := gcc python3-venv gcc-avr avr-libc qemu-system-misc arduino-core-avr chromium \
                 chromium-driver valgrind gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
 
-.PHONY: deps install data test test-rust test-python lint stubs docs bench bench-speed bench-instructions instructions-guard demo wheel wheel-check firmware-check
+.PHONY: deps install data test test-rust test-python lint stubs docs bench bench-speed bench-instructions instructions-guard screenshot demo wheel wheel-check firmware-check
 
 # Debian packages the tests need (a C compiler and venv for the build; the AVR firmware build,
 # its QEMU run, the Arduino sketch built against the Arduino AVR core; the firmware library's
@@ -110,6 +110,10 @@ bench-instructions:
 # `benches/instructions.py --update`).
 instructions-guard:
 	$(PY) benches/instructions.py --check
+
+# Retakes the README's screenshot of the live page (docs/live.png) in headless Chromium.
+screenshot:
+	TRIAXCAL_UPDATE_SCREENSHOT=1 $(PY) -m pytest -q tests/test_live_browser.py
 
 demo:
 	$(PY) -c "import sys; from triaxcal.cli import main; sys.exit(main(['demo']))"
