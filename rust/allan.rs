@@ -37,7 +37,7 @@
 //! samples) and independent of the number of samples; the work per sample is one
 //! double-double addition plus a few operations per exact cluster size. Rows are processed in
 //! batches: the phases of a batch are written straight into the ring of stride 1 (the other
-//! strides take every `d`-th of them), then each axis's new terms are summed in [`PARTS`]
+//! strides take every `d`-th of them), then each axis's new terms are summed in `PARTS`
 //! parts, each part through all the clusters in increasing size (the phases `2m` back that the
 //! cluster of `m` reads are the ones the cluster of `2m` reads `2m` back: still in cache);
 //! the parts run in parallel when there are many terms, and their sums are added in a fixed

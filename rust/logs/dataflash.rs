@@ -48,7 +48,7 @@ enum Kind {
     Deg7,
     /// Text of this many bytes.
     Text(usize),
-    /// int16[32] (`a`).
+    /// `int16[32]` (`a`).
     Array,
 }
 
@@ -167,7 +167,7 @@ fn text(b: &[u8], latin1: bool) -> String {
 pub struct Messages {
     /// Message name.
     pub name: String,
-    /// Columns by name (all but int16[32] arrays): integers as int64 (`Q` as uint64),
+    /// Columns by name (all but `int16[32]` arrays): integers as int64 (`Q` as uint64),
     /// numbers with a scale or a fraction as float64 (scaled as pymavlink scales them), text
     /// as strings.
     pub columns: Vec<(String, Column)>,
