@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from triaxcal import sim
+from triaxcal.detect import detect_poses
 from triaxcal.io.board_poses import BoardPoseDecoder, BoardPoseSettings
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -238,6 +240,84 @@ def test_a_fast_steady_turn_is_never_taken_for_the_bias(lib):
     assert len(d.poses) == 1
     d.feed(still(400, seed=6))
     assert len(d.poses) == 2
+
+
+def _twist_first(seed: int, n_poses: int = 12):
+    """The pose detector's own twist-first stream (tests/test_detect.py): flat on a table,
+    twisted about the vertical at 10 deg/s (1310 counts) from the first sample for 3 s, then
+    ``n_poses`` rests of 1 s joined by twists of 0.5 s, each at its own speed; rounded to
+    counts, with a temperature channel. Returns the rows and the samples at rest."""
+    rng = np.random.default_rng(seed)
+    bias = np.array([60.0, -40.0, 25.0])
+    rates = [1310.0 * np.ones(300)]
+    for _ in range(n_poses):
+        rates.append(np.zeros(100))
+        rates.append(float(rng.uniform(20, 60)) * 131 * np.sin(np.linspace(0, np.pi, 50)))
+    z = np.concatenate(rates)
+    n = len(z)
+    rows = np.zeros((n, 7), dtype=np.int64)
+    rows[:, 0:3] = np.round([0.0, 0.0, 16384.0] + rng.normal(0, 30, (n, 3)))
+    gyro = bias + rng.normal(0, 4, (n, 3))
+    gyro[:, 2] += z
+    rows[:, 3:6] = np.round(gyro)
+    rows[:, 6] = -1500
+    return rows, z == 0
+
+
+#: 1 s rests (4 windows): a moving window, a skipped one and 2 averaged fit in them
+QUICK = BoardPoseSettings(hold_windows=2, holdoff_ms=0)
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_a_twist_at_the_start_does_not_capture_the_gyro_bias(lib, seed):
+    """A twist about the vertical from the first sample is steady to the accelerometer and to
+    the gyro, so its rate was taken for the bias; every rest after it was a turn (1310 counts
+    off), and 4-window rests never gave the 8 windows in a row that follow a drift: 1 pose.
+    The first bias is provisional now, as in the host's detector: 8 steady windows off it at
+    one rate, after different moves, replace it. The board then finds the poses the host's
+    detector finds -- the same rests, inside the host's spans -- except the rest in which the
+    bias is replaced (the host registers its last window; the board needs a skipped window and
+    2 averaged ones)."""
+    rows, rest = _twist_first(seed)
+    d = Detector(lib, QUICK)
+    d.feed(rows)
+    host = detect_poses(rows[:, :6].astype(float), units_per_g=16384, gyro_columns=(3, 4, 5),
+                        min_separation=0, max_windows=4).poses
+    spans = [(p.start, p.end) for p in host]
+    assert len(host) >= 1 + 12 - 3
+    assert len(d.poses) >= len(host) - 1, (d.poses, spans)
+    # every board pose is one of the host's poses: its samples inside that pose's span
+    match = []
+    for end, n, _ in d.poses:
+        inside = [k for k, (a, b) in enumerate(spans) if a <= end - n and end <= b]
+        assert len(inside) == 1, (end - n, end, spans)
+        match += inside
+    assert match[0] == 0 and d.poses[0][0] <= 300  # the twist itself is a pose to both
+    # from the first rest the board registers, it registers every pose the host does
+    assert match[1:] == list(range(match[1], len(host))), (match, spans)
+    for end, n, sums in d.poses[1:]:
+        assert rest[end - n:end].all()  # no turning sample in a pose
+        np.testing.assert_allclose(np.array(sums[3:6]) / n, [60.0, -40.0, 25.0], atol=2.0)
+
+
+def test_the_demo_cut_in_a_twist_finds_the_poses_of_a_start_at_rest(lib):
+    """The demo's board (the globe, then a tumble) recorded from sample 274: the first
+    windows lie in a twist about the vertical at 59 deg/s (7700 counts, more than 16
+    thresholds), which was taken for the bias -- every rest after it read as a fast turn and
+    the board found no pose in 20,000 samples. Cut 25 samples earlier, in the same windows,
+    the recording starts at rest. Once the provisional bias is replaced, the board finds the
+    same poses at the same samples with the same sums as from that start."""
+    script = sim.globe_script(hold_s=1.0, seed=1) + sim.tumble_script(30, seed=1)
+    x = sim.SimIMU(1).record(script, rate_hz=100).frames(7)
+    found = {}
+    for start in (249, 274):
+        d = Detector(lib, QUICK)
+        d.feed(x[start:])
+        found[start] = [(start + end, n, sums) for end, n, sums in d.poses]
+    at_rest, twist = found[249], found[274]
+    assert len(at_rest) >= 80
+    assert twist and twist == at_rest[-len(twist):]
+    assert len(twist) >= len(at_rest) - 3  # the poses of the first 6 s are lost, no more
 
 
 def test_the_largest_sums_do_not_overflow(lib):

@@ -11,8 +11,38 @@ static int32_t prev[6]; /* the previous window's accelerometer and gyro sums */
 static uint8_t have_prev;
 
 static int32_t bias[3]; /* gyro: a still window's sums */
-static uint8_t bias_known;
+static uint8_t bias_state; /* BIAS_* bits */
 static uint8_t reanchor; /* steady windows in a row with the gyro a little off its bias */
+
+/* The first bias is provisional. It is taken from the first window whose accelerometer and
+ * gyro both stayed steady, and a board twisted about the vertical at a constant rate from the
+ * start looks just that: the twist rate became the bias, every still window after it read as
+ * turning, and the way back (the drift rule: 8 unchanging windows in a row) never comes when
+ * every rest lasts 4 or 5 windows and each move resets the count. So, as in the host's
+ * detector (triaxcal.detect):
+ *   - the bias is confirmed (BIAS_SURE) when, after a move, a steady window is back at it --
+ *     at the first rest after the first move of a recording that starts still, which then
+ *     goes exactly as before;
+ *   - until then, the gyro sums of steady windows off it are gathered in two slots, each
+ *     holding the windows within the threshold of its first one; when a slot holds
+ *     STILL_REANCHOR_WINDOWS windows that lie on either side of a move, the window that filled
+ *     it becomes the bias, however far off the old one, and is confirmed. Coming back to one
+ *     rate after different moves is the sign of rest the provisional bias lacks (turns by hand
+ *     do not repeat a speed to a few tenths of a degree a second), while a turn at constant
+ *     speed is one stretch, within one move;
+ *   - a confirmed bias (and meanwhile a provisional one) follows a drift as before.
+ * The host's detector keeps the last 32 such windows and counts those within the threshold of
+ * the newest; two slots do it in 26 bytes of RAM: the windows of the rests outnumber the few
+ * steady windows inside a turn, which take the slot with fewer windows. */
+#define BIAS_KNOWN 0x01 /* a bias was taken */
+#define BIAS_SURE 0x02  /* the board came to rest at it again after a move */
+#define BIAS_MOVED 0x04 /* a move since the bias was taken or last replaced */
+#define REST_COUNT 0x0F /* rest_n[]: windows in the slot (0: empty) */
+#define REST_MOVED 0x40 /* rest_n[]: a move since the slot's first window */
+#define REST_TWO 0x80   /* rest_n[]: its windows lie on either side of a move */
+#define REST_SLOTS 2    /* rest_again() chooses between two */
+static int32_t rest[REST_SLOTS][3]; /* gyro sums of each slot's first window */
+static uint8_t rest_n[REST_SLOTS];
 
 static uint8_t armed;   /* moved since the last pose (or no pose yet) */
 static uint8_t settled; /* the first steady window after a move was seen (not averaged) */
@@ -78,8 +108,9 @@ void still_start(const struct still_settings *s)
     memset(win, 0, sizeof win);
     win_n = 0;
     have_prev = 0;
-    bias_known = 0;
+    bias_state = 0;
     reanchor = 0;
+    memset(rest_n, 0, sizeof rest_n);
     armed = 1;
     settled = 0;
     holdoff_left = 0;
@@ -98,6 +129,35 @@ static int32_t abs32(int32_t v) { return v < 0 ? -v : v; }
 static int16_t clamp16(int32_t v)
 {
     return v > 32767 ? 32767 : v < -32768 ? -32768 : (int16_t)v;
+}
+
+/* A steady window off the provisional bias: into its slot (or the emptier one). 1 when its
+ * slot is full and spans a move -- the window is then the bias, confirmed. */
+static uint8_t rest_again(int32_t thr_g)
+{
+    uint8_t i, k, use = REST_SLOTS;
+    for (k = 0; k < REST_SLOTS && use == REST_SLOTS; k++) {
+        if (!(rest_n[k] & REST_COUNT)) continue;
+        use = k;
+        for (i = 0; i < 3; i++) {
+            if (abs32(win[3 + i] - rest[k][i]) > thr_g) use = REST_SLOTS;
+        }
+    }
+    if (use == REST_SLOTS) {
+        /* a rate of its own: the slot with fewer windows (the later one on a tie) starts again */
+        use = (rest_n[0] & REST_COUNT) < (rest_n[1] & REST_COUNT) ? 0 : 1;
+        memcpy(rest[use], win + 3, sizeof rest[use]);
+        rest_n[use] = 1;
+        return 0;
+    }
+    if (rest_n[use] & REST_MOVED) rest_n[use] |= REST_TWO;
+    if ((rest_n[use] & REST_COUNT) < STILL_REANCHOR_WINDOWS) rest_n[use]++;
+    if ((rest_n[use] & REST_COUNT) < STILL_REANCHOR_WINDOWS || !(rest_n[use] & REST_TWO))
+        return 0;
+    memcpy(bias, win + 3, sizeof bias);
+    bias_state = BIAS_KNOWN | BIAS_SURE;
+    memset(rest_n, 0, sizeof rest_n);
+    return 1;
 }
 
 static uint8_t window_done(void)
@@ -119,12 +179,19 @@ static uint8_t window_done(void)
     uint8_t arm = moved;
     if (gyro && !g_steady) arm = 1;
     if (gyro) {
-        if (!bias_known) {
+        if (moved || !g_steady) {
+            /* a move (or the first window): the provisional bias and the slots note it */
+            bias_state |= BIAS_MOVED;
+            for (i = 0; i < REST_SLOTS; i++) {
+                if (rest_n[i]) rest_n[i] |= REST_MOVED;
+            }
+        }
+        if (!(bias_state & BIAS_KNOWN)) {
             if (moved || !g_steady) {
                 moved = 1;
             } else {
-                for (i = 0; i < 3; i++) bias[i] = win[3 + i];
-                bias_known = 1;
+                memcpy(bias, win + 3, sizeof bias);
+                bias_state = BIAS_KNOWN; /* provisional */
             }
         } else {
             uint8_t off = 0, near = 1;
@@ -133,10 +200,21 @@ static uint8_t window_done(void)
                 if (away > thr_g) off = 1;
                 if (away > STILL_REANCHOR_MAX * thr_g) near = 0;
             }
+            if (!(bias_state & BIAS_SURE) && !moved && g_steady) {
+                if (!off && (bias_state & BIAS_MOVED)) {
+                    /* at rest at the bias again after a move: confirmed */
+                    bias_state |= BIAS_SURE;
+                    memset(rest_n, 0, sizeof rest_n);
+                } else if (off && rest_again(thr_g)) {
+                    off = 0; /* resting at the bias that replaced it */
+                    near = 1;
+                }
+            }
             if (off && near && !moved && g_steady && ++reanchor >= STILL_REANCHOR_WINDOWS) {
                 /* steady for a while, a little off: the bias moved (or was taken while the
                  * board turned), follow it -- the host's detector does the same */
-                for (i = 0; i < 3; i++) bias[i] = win[3 + i];
+                memcpy(bias, win + 3, sizeof bias);
+                bias_state &= (uint8_t)~BIAS_MOVED;
                 off = 0;
             }
             if (!off || !near || moved || !g_steady) reanchor = 0;
@@ -164,7 +242,7 @@ static uint8_t window_done(void)
                 pose.index = status.poses++;
                 pose.n = (uint16_t)((uint16_t)status.run * set.window);
                 if (gyro) {
-                    for (i = 0; i < 3; i++) bias[i] = win[3 + i];
+                    memcpy(bias, win + 3, sizeof bias);
                 }
                 armed = 0;
                 settled = 0;
@@ -178,10 +256,11 @@ static uint8_t window_done(void)
     status.flags = (uint8_t)((moved ? STILL_FLAG_MOVED : 0) |
                              (holdoff_left ? STILL_FLAG_HOLDOFF : 0) |
                              (armed ? 0 : STILL_FLAG_WAITING) |
-                             (bias_known ? STILL_FLAG_BIAS : 0));
+                             (bias_state & BIAS_KNOWN ? STILL_FLAG_BIAS : 0));
     for (i = 0; i < 3; i++) {
         status.accel[i] = clamp16(win[i] / set.window);
-        status.rate[i] = clamp16((win[3 + i] - (bias_known ? bias[i] : 0)) / set.window);
+        status.rate[i] =
+            clamp16((win[3 + i] - (bias_state & BIAS_KNOWN ? bias[i] : 0)) / set.window);
     }
     memset(win, 0, sizeof win);
     win_n = 0;

@@ -13,7 +13,11 @@
  * registered pose. If the gyro stays off the bias by less than STILL_REANCHOR_MAX thresholds
  * but unchanging for STILL_REANCHOR_WINDOWS windows the accelerometer calls steady (the bias
  * drifted, or was taken while the board turned), that mean becomes the bias (the host's
- * detector, triaxcal.detect, does the same).
+ * detector, triaxcal.detect, does the same). The first bias is provisional (a board twisted
+ * about the vertical from the start is steady to both sensors): it is confirmed when the board
+ * rests at it again after a move, and until then STILL_REANCHOR_WINDOWS steady windows at one
+ * rate on either side of a move replace it, however far off (still.c says why; the host's
+ * detector does the same).
  * After a move, the first steady window is not averaged (it may hold the end of the move);
  * the next `hold_windows` steady windows are, and then the pose is registered: its sums and
  * sample count are sent, the buzzer beeps, and for `holdoff_ms` no pose is averaged (the
