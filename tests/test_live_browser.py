@@ -6,8 +6,8 @@ starts and the sphere fills; the fit converges to the simulator's truth; the pag
 equal /api/state; Save writes what `triaxcal fit` writes; nothing left 127.0.0.1 and the
 console stayed clean. Then a second capture has its cable pulled. The README's screenshot,
 ``docs/live.png``, is taken here and written only when ``TRIAXCAL_UPDATE_SCREENSHOT=1``
-(``make screenshot``), so that a test run leaves the checkout as it found it. Every wait is on a condition with a generous limit, so
-a loaded machine only makes the tests slower.
+(``make screenshot``), so that a test run leaves the checkout as it found it. Every wait is on
+a condition with a generous limit, so a loaded machine only makes the tests slower.
 
 Skipped only when chromium or chromedriver is missing (``make deps`` installs both; CI does).
 """
