@@ -437,11 +437,14 @@ def notes(ins: dict[str, float]) -> list[str]:
     if fits:
         cpu = ", ".join(f"N = {int(k[4:]):,}: wall {STATS[k][1]:.1f}x, CPU {STATS[k][2]:.1f}x"
                         for k in fits)
-        text = (f"- **`fit_ellipsoid` against the normal equations** ({cpu}). Below 60,000 "
-                "points the geometric fit runs Levenberg-Marquardt on all points from the "
-                "algebraic start: the algebraic fit's own scatter matrix plus several passes "
-                "with JᵀJ, where numpy makes one `X.T @ X` (a single BLAS call over 10 "
-                "columns).")
+        text = (f"- **`fit_ellipsoid` against the normal equations** ({cpu}). numpy makes one "
+                "`X.T @ X` (a single BLAS call over 10 columns) and solves it: the algebraic "
+                "fit. triaxcal makes the geometric fit: up to 60,000 points, the algebraic "
+                "fit's scatter matrix and then Levenberg-Marquardt passes with JᵀJ on all "
+                "points; from 60,000 to 400,000 points, the scan that picks a subsample (20,000 "
+                "to 40,000 points), the fit of the subsample, and then Gauss-Newton passes on "
+                "all points until the step is below the tolerance, the last one with JᵀJ for "
+                "the standard errors.")
         if ins:
             text += (f" Instructions per point: {ins['fit_1e4']:.0f} at 1e4 "
                      f"({ins['fit_1e4'] / ins['pass']:.1f} passes of {ins['pass']:.1f}), "
@@ -492,15 +495,16 @@ def notes(ins: dict[str, float]) -> list[str]:
                              "of two cores.")
             if "oadev-1000000" in allan:
                 text += (" The overlapping deviation's floor: each term reads three "
-                         "double-double phases, two of them m and 2m samples back; its loop "
-                         "takes 31 instructions per 8 terms (8 loads, 16 additions, 4 for the "
-                         "squares, 3 for the loop), where plain-double phases would take about "
-                         "half and lose the digits the double-double keeps. At 1e6 samples "
-                         "every cluster is exact, and the rings of phases (2^19 + 16,387 per "
-                         "axis, 8.7 MB each, 26 MB for three axes) and the 24 MB of samples do "
-                         "not fit together in the 32 MB last-level cache, so the clusters past "
-                         "the private caches wait on memory: that is why its instruction rate "
-                         "is below the non-overlapping one's.")
+                         "double-double phases (48 bytes), two of them m and 2m samples back; "
+                         "its loop takes 31 instructions per 8 terms (8 loads, 16 additions, 4 "
+                         "for the squares, 3 for the loop). The time follows the bytes, not the "
+                         "instructions: multiply-adds that cut the loop's count by 16 % left the "
+                         "time as it was, one axis alone (its ring and samples well inside the "
+                         "32 MB last-level cache) costs as much per axis as three, and a timing "
+                         "probe that skipped the error parts (half the bytes, wrong results) "
+                         "halved it. Plain-double phases would halve the bytes but lose the "
+                         "digits the double-double keeps. The bytes are why its instruction "
+                         "rate is below the non-overlapping one's.")
                 if o and a and a[4] == a[4] and a[4] > 0:
                     loop = 31 / 8 * ins["oadev_terms_1e6"]
                     best = loop / (ins["adev_1e6"] / a[4]) / 2
