@@ -315,7 +315,6 @@ fn join(run: &mut [Level], piece: Vec<Level>, want: &[Option<usize>]) {
 /// One batch of `b` rows of one axis: its readings `col[0], col[nax], ...` become level 0,
 /// then each level adds its differences and pairs its blocks into the next (dispatches to
 /// the AVX2 build where the CPU has it).
-#[allow(clippy::too_many_arguments)]
 fn push_batch(
     reference: &mut f64,
     levels: &mut [Level],
@@ -336,7 +335,6 @@ fn push_batch(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 fn push_batch_avx2(
     reference: &mut f64,
     levels: &mut [Level],
@@ -350,7 +348,6 @@ fn push_batch_avx2(
 }
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn push_batch_impl(
     reference: &mut f64,
     levels: &mut [Level],

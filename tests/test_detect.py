@@ -9,6 +9,7 @@ import pytest
 import triaxcal as tc
 import triaxcal.detect as detect_mod
 from _realdata import load_imutk_xsens
+from _synth import twist_first
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from triaxcal.detect import TOO_CLOSE, TOO_NOISY, TOO_SHORT
@@ -325,23 +326,6 @@ def test_gyro_bias_that_moved_during_motion_is_followed():
     assert starts[2] - 2 * span <= (detect_mod.REANCHOR_WINDOWS + 2) * w
 
 
-def _twist_first(rng, n_poses: int = 12):
-    """Flat on a table, twisted about the vertical from the first sample (10 deg/s for 3 s),
-    then ``n_poses`` poses of 1 s (4 windows of 25) joined by twists of 0.5 s, each at its own
-    speed: accelerometer, gyroscope (bias 60, -40, 25 counts; 131 counts per deg/s)."""
-    bias = np.array([60.0, -40.0, 25.0])
-    rates = [1310.0 * np.ones(300)]
-    for _ in range(n_poses):
-        rates.append(np.zeros(100))
-        rates.append(float(rng.uniform(20, 60)) * 131 * np.sin(np.linspace(0, np.pi, 50)))
-    z = np.concatenate(rates)
-    n = len(z)
-    acc = np.tile([0.0, 0.0, 16384.0], (n, 1)) + rng.normal(0, 30, (n, 3))
-    gyro = bias + rng.normal(0, 4, (n, 3))
-    gyro[:, 2] += z
-    return np.hstack([acc, gyro]), (z == 0)
-
-
 def test_twist_at_the_start_does_not_become_the_gyro_bias():
     # the gyro's threshold is learnt from the first steady windows of the accelerometer, which
     # a twist about the vertical does not disturb: its rate was taken for the bias, every pose
@@ -350,7 +334,7 @@ def test_twist_at_the_start_does_not_become_the_gyro_bias():
     # three are found. (The twist itself is a pose: without a magnetometer, nothing tells a
     # steady twist about the vertical at the start from rest.)
     rng = np.random.default_rng(5)
-    x, rest = _twist_first(rng)
+    x, rest = twist_first(rng)
     kw = {"units_per_g": 16384, "gyro_columns": G3, "min_separation": 0, "max_windows": 4}
     det = tc.detect_poses(x, **kw)
     assert det.poses[0].end <= 300 and len(det.poses) >= 1 + 12 - 3

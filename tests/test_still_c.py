@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _synth import twist_first
 from triaxcal import sim
 from triaxcal.detect import detect_poses
 from triaxcal.io.board_poses import BoardPoseDecoder, BoardPoseSettings
@@ -242,26 +243,14 @@ def test_a_fast_steady_turn_is_never_taken_for_the_bias(lib):
     assert len(d.poses) == 2
 
 
-def _twist_first(seed: int, n_poses: int = 12):
-    """The pose detector's own twist-first stream (tests/test_detect.py): flat on a table,
-    twisted about the vertical at 10 deg/s (1310 counts) from the first sample for 3 s, then
-    ``n_poses`` rests of 1 s joined by twists of 0.5 s, each at its own speed; rounded to
-    counts, with a temperature channel. Returns the rows and the samples at rest."""
-    rng = np.random.default_rng(seed)
-    bias = np.array([60.0, -40.0, 25.0])
-    rates = [1310.0 * np.ones(300)]
-    for _ in range(n_poses):
-        rates.append(np.zeros(100))
-        rates.append(float(rng.uniform(20, 60)) * 131 * np.sin(np.linspace(0, np.pi, 50)))
-    z = np.concatenate(rates)
-    n = len(z)
-    rows = np.zeros((n, 7), dtype=np.int64)
-    rows[:, 0:3] = np.round([0.0, 0.0, 16384.0] + rng.normal(0, 30, (n, 3)))
-    gyro = bias + rng.normal(0, 4, (n, 3))
-    gyro[:, 2] += z
-    rows[:, 3:6] = np.round(gyro)
+def _twist_first(seed: int):
+    """The pose detectors' twist-first stream (``_synth.twist_first``) rounded to counts, with
+    a temperature channel. Returns the rows and the samples at rest."""
+    x, rest = twist_first(np.random.default_rng(seed))
+    rows = np.zeros((len(x), 7), dtype=np.int64)
+    rows[:, :6] = np.round(x)
     rows[:, 6] = -1500
-    return rows, z == 0
+    return rows, rest
 
 
 #: 1 s rests (4 windows): a moving window, a skipped one and 2 averaged fit in them

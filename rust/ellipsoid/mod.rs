@@ -449,8 +449,11 @@ fn not_determined(model: Model, detail: &str) -> CalError {
 struct Samples {
     sub: Vec<[f64; 3]>,
     /// The curvature sample in two halves (by a bit of the hash).
-    curv: Option<(Vec<[f64; 3]>, Vec<[f64; 3]>)>,
+    curv: Option<Halves>,
 }
+
+/// Two halves of a sample of points.
+type Halves = (Vec<[f64; 3]>, Vec<[f64; 3]>);
 
 /// The fit proper; `sample`: the samples of a large input (None: fit all points directly).
 fn fit_generic<const P: usize>(
