@@ -221,6 +221,24 @@ def sim_elf(tmp_path_factory) -> Path:
     return build / "triaxcal-sim.elf"
 
 
+def interrupt_frame(objects: Path) -> int:
+    """Bytes of stack the deepest interrupt takes: its frame (registers and return address)
+    plus the frames of what it calls, from the ``.su`` files that ``-fstack-usage`` leaves
+    beside the objects. Interrupts do not nest (the AVR clears I on entry)."""
+    frame: dict[str, int] = {}
+    for su in objects.glob("*.su"):
+        for line in su.read_text().splitlines():
+            where, size, _kind = line.split("\t")
+            frame[where.rsplit(":", 1)[-1]] = int(size)
+    calls = {"__vector_11": ["buzzer_tick"], "__vector_18": []}  # TIMER1_COMPA, USART_RX
+    bodies = dict(re.findall(r"^ISR\((\w+)\)\s*\{(.*?)^\}", "".join(
+        f.read_text() for f in sorted((FIRMWARE / "src").glob("*.c"))), flags=re.M | re.S))
+    assert sorted(bodies) == ["TIMER1_COMPA_vect", "USART_RX_vect"], sorted(bodies)
+    assert re.findall(r"(\w+)\(", bodies["TIMER1_COMPA_vect"]) == ["buzzer_tick"]
+    assert re.findall(r"(\w+)\(", bodies["USART_RX_vect"]) == []
+    return max(frame[v] + sum(frame[c] for c in called) for v, called in calls.items())
+
+
 def frames_after(port, command: bytes, want, timeout_s: float = 30.0) -> list:
     """Send ``command``; decode K and Q frames until ``want(frames)`` holds."""
     dec = BoardStoreDecoder()
@@ -270,7 +288,12 @@ def test_the_board_calibrates_itself(sim_elf, tmp_path, capsys):
             rep = next(x for x in got if isinstance(x, RecordReport))
             assert q.code == 0 and q.descent_code == 0 and rep.reason == "fitted"
             assert q.n == 60 and min(q.faces) >= 9  # the 60 poses kept cover every face
-            assert q.stack_free >= 48, q.stack_free  # RAM the fit's stack never reached
+            # RAM the stack never reached. An interrupt taken at the fit's deepest point adds
+            # its frame to the measured depth or not, as the timing falls (41 and 56 bytes to
+            # spare seen): what is left must hold the deepest interrupt once more.
+            isr = interrupt_frame(sim_elf.parent / "sim")
+            assert 0 < isr < 40, isr
+            assert q.stack_free >= isr, (q.stack_free, isr)
             with capsys.disabled():
                 print(f"\nboard: {q.n} poses kept, seed's centre {np.round(q.center, 3)}, "
                       f"RMS {q.rms:.3f} counts, spread {q.spread:.3f}, faces {q.faces}, "
