@@ -33,6 +33,11 @@
 //! blocks of `m` make the blocks of `2m`) gives them all for about one addition per sample
 //! (`allan_octave.rs`).
 //!
+//! The overlapping deviation at power-of-two sizes, every start, skips the phases too: each
+//! term is the difference of two window sums `m` apart, and the windows of `2m` are sums of
+//! pairs of windows of `m` (`allan_cascade.rs`), two reads and a write per term instead of
+//! three double-double phases.
+//!
 //! Memory is fixed when the accumulator is made (a few MB per axis for clusters up to 2⁴⁰
 //! samples) and independent of the number of samples; the work per sample is one
 //! double-double addition plus a few operations per exact cluster size. Rows are processed in
@@ -45,6 +50,8 @@
 
 use crate::error::{CalError, Result};
 
+#[path = "allan_cascade.rs"]
+mod cascade;
 #[path = "allan_kernels.rs"]
 mod kernels;
 #[path = "allan_octave.rs"]
@@ -192,6 +199,9 @@ pub struct Allan {
     /// The pyramid of block sums that replaces the levels and axes above (non-overlapping
     /// deviation at power-of-two sizes only).
     octave: Option<octave::Octave>,
+    /// The cascade of window sums that replaces the levels and axes above (overlapping
+    /// deviation at power-of-two sizes, every start).
+    cascade: Option<cascade::Cascade>,
 }
 
 /// The Allan deviation of everything pushed so far.
@@ -213,7 +223,23 @@ pub struct AllanResult {
 impl Allan {
     /// An accumulator for `axes` interleaved channels sampled at `rate_hz`, computing the
     /// cluster sizes `ms` (in samples; see [`plan`] for `exact_up_to`).
+    ///
+    /// When every size is a power of two computed at every start (octave taus within
+    /// `exact_up_to`), the deviation is computed from a cascade of window sums (see
+    /// `allan_cascade.rs`): the same terms for a third of the memory traffic.
     pub fn new(rate_hz: f64, axes: usize, ms: &[u64], exact_up_to: Option<u64>) -> Result<Allan> {
+        Allan::new_with(rate_hz, axes, ms, exact_up_to, true)
+    }
+
+    /// [`Allan::new`], with the cascade of window sums allowed or not (`false`: the general
+    /// path, whatever the sizes).
+    pub(crate) fn new_with(
+        rate_hz: f64,
+        axes: usize,
+        ms: &[u64],
+        exact_up_to: Option<u64>,
+        cascade: bool,
+    ) -> Result<Allan> {
         crate::error::check_positive("rate_hz", rate_hz)?;
         if axes == 0 || axes > 64 {
             return Err(CalError::InvalidArgument(format!(
@@ -226,6 +252,21 @@ impl Allan {
             ));
         }
         let clusters = plan(ms, exact_up_to)?;
+        if cascade {
+            if let Some(c) = cascade::Cascade::new(axes, &clusters) {
+                return Ok(Allan {
+                    rate_hz,
+                    nax: axes,
+                    clusters,
+                    levels: Vec::new(),
+                    axes: Vec::new(),
+                    n: 0,
+                    parallel: true,
+                    octave: None,
+                    cascade: Some(c),
+                });
+            }
+        }
         Allan::with_clusters(rate_hz, axes, clusters)
     }
 
@@ -276,6 +317,7 @@ impl Allan {
                     n: 0,
                     parallel: true,
                     octave: Some(octave),
+                    cascade: None,
                 });
             }
         }
@@ -350,6 +392,7 @@ impl Allan {
             n: 0,
             parallel: true,
             octave: None,
+            cascade: None,
         };
         // phase index 0 (x_0 = 0) belongs to every level
         for a in acc.axes.iter_mut() {
@@ -395,6 +438,9 @@ impl Allan {
         if let Some(o) = &self.octave {
             return o.memory_bytes();
         }
+        if let Some(c) = &self.cascade {
+            return c.memory_bytes();
+        }
         let per_axis: usize = self.levels.iter().map(|l| 16 * l.cap).sum::<usize>()
             + 16 * BATCH
             + 16 * self.clusters.len();
@@ -421,15 +467,17 @@ impl Allan {
             first_non_finite(samples)
         };
         if let Some(i) = bad {
-            return Err(CalError::InvalidArgument(format!(
-                "sample {} (row {} of the whole stream, axis {}) is NaN or infinite: drop or \
-                 repair non-finite readings before computing the Allan deviation",
-                i / self.nax,
-                self.n + (i / self.nax) as u64,
-                i % self.nax
-            )));
+            return Err(CalError::NonFiniteSample {
+                row: self.n + (i / self.nax) as u64,
+                axis: i % self.nax,
+            });
         }
         if self.octave.is_some() {
+            self.n += rows as u64;
+            return Ok(());
+        }
+        if let Some(c) = &mut self.cascade {
+            c.push(samples, rows, self.parallel);
             self.n += rows as u64;
             return Ok(());
         }
@@ -602,6 +650,9 @@ impl Allan {
     pub fn result(&self) -> AllanResult {
         if let Some(o) = &self.octave {
             return o.result(&self.clusters, self.rate_hz, self.n);
+        }
+        if let Some(c) = &self.cascade {
+            return c.result(&self.clusters, self.rate_hz, self.n);
         }
         let nc = self.clusters.len();
         let mut terms = vec![0u64; nc];

@@ -326,10 +326,131 @@ fn pieces_join_to_the_general_path_whatever_the_threads_and_the_chunks() {
     bad[3 * row + 2] = f64::NEG_INFINITY;
     bad[3 * (row + 5)] = f64::NAN;
     let e = acc.push(&bad).unwrap_err();
+    assert_eq!(
+        e,
+        CalError::NonFiniteSample {
+            row: 1000 + row as u64,
+            axis: 2
+        }
+    );
     assert!(
         e.to_string()
-            .contains(&format!("row {} of the whole stream, axis 2", 1000 + row)),
+            .contains(&format!("row {} of the stream", 1000 + row)),
         "{e}"
     );
     assert_eq!(format!("{:?}", acc.result()), before);
+}
+
+/// Three axes, one of them on a large bias and one drifting, `n` rows.
+fn three_axes(n: usize) -> Vec<f64> {
+    let cols: Vec<Vec<f64>> = (0..3).map(|k| lcg(n, 40 + k)).collect();
+    (0..n)
+        .flat_map(|i| {
+            let drift = 1e-4 * i as f64;
+            [
+                cols[0][i] + 1e6,
+                cols[1][i] * 3.0 + drift,
+                cols[2][i] * 1e-3,
+            ]
+        })
+        .collect()
+}
+
+#[test]
+fn the_cascade_of_window_sums_matches_the_general_path_in_any_chunking() {
+    let ms: Vec<u64> = (0..16).map(|k| 1u64 << k).collect();
+    for n in [5usize, 3 * BATCH + 123, 70_001] {
+        let rows = three_axes(n);
+        let mut general = Allan::new_with(100.0, 3, &ms, None, false).unwrap();
+        general.push(&rows).unwrap();
+        let want = general.result();
+        let mut first: Option<AllanResult> = None;
+        for (chunk, parallel) in [
+            (1, false),
+            (7, true),
+            (4096, true),
+            (BATCH + 5, false),
+            (n, true),
+        ] {
+            if chunk == 1 && n > 10_000 {
+                continue;
+            }
+            let mut acc = Allan::new(100.0, 3, &ms, None).unwrap();
+            assert!(acc.cascade.is_some());
+            acc.set_parallel(parallel);
+            for c in rows.chunks(3 * chunk) {
+                acc.push(c).unwrap();
+            }
+            let r = acc.result();
+            assert_eq!(r.terms, want.terms);
+            assert_eq!(r.clusters, want.clusters);
+            for (ci, c) in r.clusters.iter().enumerate() {
+                for k in 0..3 {
+                    let (got, w) = (r.adev[ci][k], want.adev[ci][k]);
+                    if want.terms[ci] == 0 {
+                        assert!(got.is_nan() && w.is_nan());
+                    } else {
+                        assert!(
+                            (got - w).abs() <= 1e-12 * w,
+                            "n {n} chunk {chunk} m {} axis {k}: {got} vs {w}",
+                            c.m
+                        );
+                    }
+                }
+            }
+            // whole pushes: the same bits on one thread and on several
+            if chunk == n {
+                match &first {
+                    None => first = Some(r),
+                    Some(f) => assert_eq!(f.adev[3][0].to_bits(), r.adev[3][0].to_bits()),
+                }
+            }
+        }
+        let mut one = Allan::new(100.0, 3, &ms, None).unwrap();
+        one.set_parallel(false);
+        one.push(&rows).unwrap();
+        let mut two = Allan::new(100.0, 3, &ms, None).unwrap();
+        two.push(&rows).unwrap();
+        let bits =
+            |r: AllanResult| -> Vec<u64> { r.adev.iter().flatten().map(|v| v.to_bits()).collect() };
+        assert_eq!(bits(one.result()), bits(two.result()));
+    }
+}
+
+#[test]
+fn the_cascade_is_exact_on_integers_on_a_bias() {
+    // integer readings: every term of the formula is an integer, summed exactly in i128
+    let n = 50_000usize;
+    let y: Vec<i64> = lcg(n, 9)
+        .iter()
+        .map(|v| 1_000_000 + (v * 2000.0).round() as i64)
+        .collect();
+    let ms: Vec<u64> = (0..15).map(|k| 1u64 << k).collect();
+    let yf: Vec<f64> = y.iter().map(|&v| v as f64).collect();
+    // in pushes shorter than the long clusters, whose rings then swap in place
+    let mut acc = Allan::new(1.0, 1, &ms, None).unwrap();
+    for c in yf.chunks(1000) {
+        acc.push(c).unwrap();
+    }
+    let r = acc.result();
+    let mut x = vec![0i128];
+    for &v in &y {
+        x.push(x.last().unwrap() + v as i128);
+    }
+    for (ci, &m) in ms.iter().enumerate() {
+        let m = m as usize;
+        let s: i128 = (0..=n - 2 * m)
+            .map(|i| {
+                let t = x[i + 2 * m] - 2 * x[i + m] + x[i];
+                t * t
+            })
+            .sum();
+        let terms = (n - 2 * m + 1) as f64;
+        let want = (s as f64 / (2.0 * terms)).sqrt() / m as f64;
+        assert!(
+            (r.adev[ci][0] - want).abs() <= 1e-14 * want,
+            "m {m}: {} vs {want}",
+            r.adev[ci][0]
+        );
+    }
 }

@@ -31,6 +31,13 @@ pub enum CalError {
         /// What to do about it, in words.
         fix: String,
     },
+    /// A reading of a stream (the Allan deviation's) is NaN or infinite.
+    NonFiniteSample {
+        /// Zero-based row in the whole stream.
+        row: u64,
+        /// Zero-based axis (column).
+        axis: usize,
+    },
     /// An option is out of range (a non-positive radius or step, an unknown model name...).
     InvalidArgument(String),
 }
@@ -48,6 +55,11 @@ impl fmt::Display for CalError {
                 "{what} needs at least {need} points, got {got}: collect more orientations"
             ),
             CalError::Degenerate { why, fix } => write!(f, "{why}: {fix}"),
+            CalError::NonFiniteSample { row, axis } => write!(
+                f,
+                "row {row} of the stream is NaN or inf (axis {axis}): drop or repair \
+                 non-finite readings before computing the Allan deviation"
+            ),
             CalError::InvalidArgument(msg) => f.write_str(msg),
         }
     }

@@ -43,7 +43,9 @@ impl From<CoreError> for PyErr {
     fn from(e: CoreError) -> PyErr {
         let msg = e.0.to_string();
         match e.0 {
-            CalError::NonFinite { .. } => NonFiniteError::new_err(msg),
+            CalError::NonFinite { .. } | CalError::NonFiniteSample { .. } => {
+                NonFiniteError::new_err(msg)
+            }
             CalError::TooFewPoints { .. } => TooFewPointsError::new_err(msg),
             CalError::Degenerate { .. } => DegenerateDataError::new_err(msg),
             CalError::InvalidArgument(_) => CalibrationError::new_err(msg),

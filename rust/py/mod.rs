@@ -214,7 +214,9 @@ fn fit_batch<'py>(
             }
             Err(e) => {
                 kinds.append(match e {
-                    CalError::NonFinite { .. } => "NonFiniteError",
+                    CalError::NonFinite { .. } | CalError::NonFiniteSample { .. } => {
+                        "NonFiniteError"
+                    }
                     CalError::TooFewPoints { .. } => "TooFewPointsError",
                     CalError::Degenerate { .. } => "DegenerateDataError",
                     CalError::InvalidArgument(_) => "CalibrationError",

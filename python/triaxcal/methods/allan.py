@@ -12,10 +12,13 @@ the unit of the samples.
 
 Memory does not grow with the log: samples are pushed chunk by chunk (:class:`AllanAccumulator`,
 or :func:`allan` with an iterable of chunks) and only a ring of recent phases per stride is
-kept. Clusters of up to ``exact_up_to`` samples (default 65536) use every start sample, as
-above; longer ones start every ``d``-th sample, with ``d`` a power of two that leaves at least
-2048 starts per cluster (``m`` rounded to a multiple of ``d``): unbiased, statistically as good,
-and equal to ``allantools.calc_adev_phase(phase, rate, m, d)``.
+kept (or, when every cluster is a power of two starting at every sample, a ring of recent
+window sums per octave: the term is the difference of two window sums ``m`` apart, and a
+window of ``2m`` is the sum of two windows of ``m``). Clusters of up to ``exact_up_to``
+samples (default 65536) use every start sample, as above; longer ones start every ``d``-th
+sample, with ``d`` a power of two that leaves at least 2048 starts per cluster (``m`` rounded
+to a multiple of ``d``): unbiased, statistically as good, and equal to
+``allantools.calc_adev_phase(phase, rate, m, d)``.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import numpy as np
 
 from .._checks import options as opt
 from .._core import AllanStream as _CoreAllanStream
-from ..errors import CalibrationError, NonFiniteError
+from ..errors import CalibrationError
 from ..quality.bounds import sample_rate
 
 __all__ = [
@@ -276,14 +279,8 @@ class AllanAccumulator:
                 f"chunk must have shape (rows, {self.axes}), one row per reading; got "
                 f"{arr.shape}"
             )
-        arr = np.ascontiguousarray(arr, dtype=np.float64)
-        if not np.isfinite(arr).all():
-            bad = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
-            raise NonFiniteError(
-                f"row {self.n + bad} of the stream is NaN or inf: drop or repair non-finite "
-                "readings before computing the Allan deviation"
-            )
-        self._core.push(arr)
+        # the core checks every value (NonFiniteError naming the row) before adding any
+        self._core.push(np.ascontiguousarray(arr, dtype=np.float64))
 
     def result(self) -> AllanDeviation:
         """The Allan deviation of everything added (averaging times with at least 2 terms)."""

@@ -373,7 +373,7 @@ fn cases() -> Vec<Case> {
 fn code(e: &CalError) -> i32 {
     match e {
         CalError::InvalidArgument(_) => 1,
-        CalError::NonFinite { .. } => 2,
+        CalError::NonFinite { .. } | CalError::NonFiniteSample { .. } => 2,
         CalError::TooFewPoints { .. } => 3,
         CalError::Degenerate { why, .. } => {
             if why.contains("identical") {
