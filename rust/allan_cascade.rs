@@ -334,7 +334,8 @@ impl Task<'_> {
 fn less_reference(reference: &mut f64, col: &[f64], nax: usize, out: &mut [f64]) {
     let b = out.len();
     if reference.is_nan() {
-        *reference = (0..b).map(|j| col[j * nax]).sum::<f64>() / b as f64;
+        // each reading divided first: no overflow whatever the readings' size
+        *reference = (0..b).map(|j| col[j * nax] / b as f64).sum::<f64>();
     }
     let r = *reference;
     let col = &col[..(b - 1) * nax + 1];

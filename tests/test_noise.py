@@ -225,6 +225,21 @@ def test_bad_readings_are_refused_and_named():
         tc.noise_figures(np.ones((5000, 3)), RATE)
 
 
+@pytest.mark.parametrize("taus", [None, "log"])  # octaves: window sums; log: the phases
+def test_readings_at_the_edge_of_a_double(taus):
+    # a level near the largest double is no problem: the deviation of a constant is 0
+    flat = tc.allan(np.full((64, 3), 1.7e308), RATE, taus=taus)
+    assert np.all(flat.adev == 0.0)
+    # a spike whose square overflows is refused, not returned as inf or NaN
+    spike = _data(n=1000)
+    spike[500, 2] = 1e300
+    with pytest.raises(tc.CalibrationError, match="overflows a double"):
+        tc.allan(spike, RATE, taus=taus)
+    # the largest readings of both signs: their differences overflow
+    with pytest.raises(tc.CalibrationError, match="rescale"):
+        tc.allan(np.array([1.7e308, -1.7e308] * 32), RATE, taus=taus)
+
+
 # ------------------------------------------------------------------------------ figures
 
 TRUTH = NoiseTruth(white=0.005, bias_instability=0.003, random_walk=3e-4)  # deg/s units

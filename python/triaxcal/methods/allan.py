@@ -291,6 +291,12 @@ class AllanAccumulator:
                 f"too few samples ({self.n}) for any of the averaging times: an Allan deviation "
                 "at tau needs a log of at least 3 tau"
             )
+        if not np.isfinite(d["adev"][keep]).all():
+            raise CalibrationError(
+                "the Allan deviation overflows a double: readings that differ by more than "
+                "about 1e150 are not a sensor's (a wrong column, unit or scale?); rescale them "
+                "before computing it"
+            )
         axes = ("x", "y", "z") if self.axes == 3 else tuple(f"axis{i}" for i in range(self.axes))
         out = {k: np.array(d[k][keep]) for k in ("taus", "adev", "m", "stride", "terms")}
         for k in ("m", "stride", "terms"):
