@@ -137,6 +137,14 @@ impl Cascade {
         for c in clusters {
             want[c.m.trailing_zeros() as usize] = true;
         }
+        let levels = want.len();
+        // the upper stage takes half the levels, when there are enough to share
+        let lower = if levels >= 4 {
+            levels.div_ceil(2)
+        } else {
+            levels
+        };
+        let handoff = if lower < levels { GROUP * BATCH } else { 0 };
         let axis = || Axis {
             reference: f64::NAN,
             levels: (0..=top)
@@ -149,16 +157,11 @@ impl Cascade {
                 .collect(),
             readings: vec![0.0; STEP],
             bufs: std::array::from_fn(|_| vec![0.0; STEP]),
-            handoff: std::array::from_fn(|_| (take(GROUP * BATCH), 0)),
+            handoff: std::array::from_fn(|_| (take(handoff), 0)),
         };
-        let levels = want.len();
         Some(Cascade {
             want,
-            lower: if levels >= 4 {
-                levels.div_ceil(2)
-            } else {
-                levels
-            },
+            lower,
             axes: (0..nax).map(|_| axis()).collect(),
         })
     }
@@ -166,9 +169,9 @@ impl Cascade {
     /// Bytes held (fixed at construction).
     pub(super) fn memory_bytes(&self) -> usize {
         let per_axis = self.axes.first().map_or(0, |ax| {
-            ax.levels.iter().map(|l| 8 * l.ring.len()).sum::<usize>()
-                + 5 * 8 * STEP
-                + 2 * 8 * GROUP * BATCH
+            let rings: usize = ax.levels.iter().map(|l| l.ring.len()).sum();
+            let handoff: usize = ax.handoff.iter().map(|h| h.0.len()).sum();
+            8 * (rings + handoff + ax.readings.len() + ax.bufs.iter().map(Vec::len).sum::<usize>())
         }) + self.want.len() * std::mem::size_of::<Level>();
         per_axis * self.axes.len()
     }
