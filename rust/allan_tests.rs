@@ -454,3 +454,27 @@ fn the_cascade_is_exact_on_integers_on_a_bias() {
         );
     }
 }
+
+#[test]
+fn a_large_push_with_a_nan_names_its_first_row_and_adds_nothing() {
+    let ms: Vec<u64> = (0..10).map(|k| 1u64 << k).collect();
+    for cascade in [true, false] {
+        let mut acc = Allan::new_with(10.0, 3, &ms, None, cascade).unwrap();
+        acc.push(&three_axes(1000)).unwrap();
+        let before = format!("{:?}", acc.result());
+        // a push of 600,000 values with a NaN and, earlier, an infinity
+        let mut rows = three_axes(200_000);
+        rows[3 * 150_000 + 1] = f64::NAN;
+        rows[3 * 70_001 + 2] = f64::INFINITY;
+        let e = acc.push(&rows).unwrap_err();
+        assert_eq!(
+            e,
+            CalError::NonFiniteSample {
+                row: 1000 + 70_001,
+                axis: 2
+            }
+        );
+        assert_eq!(format!("{:?}", acc.result()), before);
+        assert_eq!(acc.len(), 1000);
+    }
+}
