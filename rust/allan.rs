@@ -57,7 +57,7 @@ mod kernels;
 #[path = "allan_octave.rs"]
 mod octave;
 
-use kernels::{gather, phases, sum_terms};
+use kernels::{first_non_finite, gather, phases, sum_terms};
 
 /// Rows of a chunk processed together (phases are computed for a batch, then every cluster
 /// reads them as contiguous slices, which vectorises).
@@ -254,17 +254,7 @@ impl Allan {
         let clusters = plan(ms, exact_up_to)?;
         if cascade {
             if let Some(c) = cascade::Cascade::new(axes, &clusters) {
-                return Ok(Allan {
-                    rate_hz,
-                    nax: axes,
-                    clusters,
-                    levels: Vec::new(),
-                    axes: Vec::new(),
-                    n: 0,
-                    parallel: true,
-                    octave: None,
-                    cascade: Some(c),
-                });
+                return Ok(Allan::of_sums(rate_hz, axes, clusters, None, Some(c)));
             }
         }
         Allan::with_clusters(rate_hz, axes, clusters)
@@ -308,20 +298,31 @@ impl Allan {
         clusters.dedup_by_key(|c| c.m);
         if pyramid {
             if let Some(octave) = octave::Octave::new(axes, &clusters) {
-                return Ok(Allan {
-                    rate_hz,
-                    nax: axes,
-                    clusters,
-                    levels: Vec::new(),
-                    axes: Vec::new(),
-                    n: 0,
-                    parallel: true,
-                    octave: Some(octave),
-                    cascade: None,
-                });
+                return Ok(Allan::of_sums(rate_hz, axes, clusters, Some(octave), None));
             }
         }
         Allan::with_clusters(rate_hz, axes, clusters)
+    }
+
+    /// An accumulator of block or window sums (the general path's levels and axes unused).
+    fn of_sums(
+        rate_hz: f64,
+        nax: usize,
+        clusters: Vec<Cluster>,
+        octave: Option<octave::Octave>,
+        cascade: Option<cascade::Cascade>,
+    ) -> Allan {
+        Allan {
+            rate_hz,
+            nax,
+            clusters,
+            levels: Vec::new(),
+            axes: Vec::new(),
+            n: 0,
+            parallel: true,
+            octave,
+            cascade,
+        }
     }
 
     fn with_clusters(rate_hz: f64, axes: usize, clusters: Vec<Cluster>) -> Result<Allan> {
@@ -684,6 +685,40 @@ impl Allan {
     }
 }
 
+/// The result at power-of-two cluster sizes from each axis's per-level Kahan sums:
+/// `sums(axis, level)` gives (sum, compensation) of the level `log2 m`, and `terms(m)` the
+/// number of terms after `n` samples.
+fn octave_result(
+    clusters: &[Cluster],
+    rate_hz: f64,
+    n: u64,
+    nax: usize,
+    terms: impl Fn(u64) -> u64,
+    sums: impl Fn(usize, usize) -> (f64, f64),
+) -> AllanResult {
+    let terms: Vec<u64> = clusters.iter().map(|c| terms(c.m)).collect();
+    let adev = clusters
+        .iter()
+        .zip(&terms)
+        .map(|(c, &t)| {
+            let level = c.m.trailing_zeros() as usize;
+            (0..nax)
+                .map(|a| {
+                    let (sum, comp) = sums(a, level);
+                    deviation(sum, comp, t, c.m)
+                })
+                .collect()
+        })
+        .collect();
+    AllanResult {
+        clusters: clusters.to_vec(),
+        taus: clusters.iter().map(|c| c.m as f64 / rate_hz).collect(),
+        adev,
+        terms,
+        n,
+    }
+}
+
 /// Adds `s` to a Kahan sum (`sum`, and `comp` its compensation), so that the total over a
 /// whole log keeps full precision (true sum = sum - comp).
 #[inline(always)]
@@ -701,42 +736,6 @@ fn deviation(sum: f64, comp: f64, terms: u64, m: u64) -> f64 {
         f64::NAN
     } else {
         ((sum - comp) / (2.0 * terms as f64)).sqrt() / m as f64
-    }
-}
-
-/// The index of the first NaN or infinite value, if any. The common case, all finite, is one
-/// vectorised pass: `v * 0` is 0 for a finite `v` and NaN otherwise (AVX2 where the CPU has
-/// it: the samples are read once per push, and this pass is a tenth of a non-overlapping
-/// deviation's work).
-fn first_non_finite(samples: &[f64]) -> Option<usize> {
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::has_avx2_fma() {
-        return crate::simd::avx2_call!(first_non_finite_avx2(samples));
-    }
-    first_non_finite_impl(samples)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn first_non_finite_avx2(samples: &[f64]) -> Option<usize> {
-    first_non_finite_impl(samples)
-}
-
-#[inline(always)]
-fn first_non_finite_impl(samples: &[f64]) -> Option<usize> {
-    let mut acc = [0.0f64; 2 * LANES];
-    let chunks = samples.chunks_exact(2 * LANES);
-    let tail = chunks.remainder();
-    for c in chunks {
-        for j in 0..2 * LANES {
-            acc[j] += c[j] * 0.0;
-        }
-    }
-    let clean = acc.iter().chain(tail).all(|v| v.is_finite());
-    if clean {
-        None
-    } else {
-        samples.iter().position(|v| !v.is_finite())
     }
 }
 

@@ -50,7 +50,7 @@ const GROUP: usize = 4;
 /// explains how to stride them.
 const MAX_TOP: u32 = 27;
 
-/// Bytes of buffers that dropped accumulators leave for the next ones (see [`Spare`]).
+/// Bytes of buffers that dropped accumulators leave for the next ones (see [`SPARE`]).
 const SPARE_BYTES: usize = 64 << 20;
 
 /// Buffers of dropped accumulators, kept for the next: a one-shot deviation makes and drops
@@ -230,33 +230,20 @@ impl Cascade {
         }
     }
 
-    /// The deviation after `n` samples per axis, for `clusters` (those given to [`new`]).
+    /// The deviation after `n` samples per axis, for `clusters` (those given to [`Cascade::new`]).
     pub(super) fn result(&self, clusters: &[Cluster], rate_hz: f64, n: u64) -> AllanResult {
-        let terms: Vec<u64> = clusters
-            .iter()
-            .map(|c| (n + 1).saturating_sub(2 * c.m))
-            .collect();
-        let adev = clusters
-            .iter()
-            .enumerate()
-            .map(|(ci, c)| {
-                let level = c.m.trailing_zeros() as usize;
-                self.axes
-                    .iter()
-                    .map(|ax| {
-                        let l = &ax.levels[level];
-                        super::deviation(l.sum, l.comp, terms[ci], c.m)
-                    })
-                    .collect()
-            })
-            .collect();
-        AllanResult {
-            clusters: clusters.to_vec(),
-            taus: clusters.iter().map(|c| c.m as f64 / rate_hz).collect(),
-            adev,
-            terms,
+        let levels = |a: usize, k: usize| {
+            let l = &self.axes[a].levels[k];
+            (l.sum, l.comp)
+        };
+        super::octave_result(
+            clusters,
+            rate_hz,
             n,
-        }
+            self.axes.len(),
+            |m| (n + 1).saturating_sub(2 * m),
+            levels,
+        )
     }
 }
 

@@ -1,5 +1,6 @@
 //! The inner loops of the general Allan deviation path (`allan.rs`): the double-double
-//! phases, the strided copies between levels, and the sums of the terms.
+//! phases, the strided copies between levels, and the sums of the terms; and the check for
+//! NaN and infinities that every path makes.
 
 use super::{Ring, LANES};
 
@@ -170,4 +171,40 @@ fn run_impl(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f6
         tail += t * t;
     }
     acc.iter().sum::<f64>() + tail
+}
+
+/// The index of the first NaN or infinite value, if any. The common case, all finite, is one
+/// vectorised pass: `v * 0` is 0 for a finite `v` and NaN otherwise (AVX2 where the CPU has
+/// it: the samples are read once per push, and this pass is a tenth of a non-overlapping
+/// deviation's work).
+pub(super) fn first_non_finite(samples: &[f64]) -> Option<usize> {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::has_avx2_fma() {
+        return crate::simd::avx2_call!(first_non_finite_avx2(samples));
+    }
+    first_non_finite_impl(samples)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn first_non_finite_avx2(samples: &[f64]) -> Option<usize> {
+    first_non_finite_impl(samples)
+}
+
+#[inline(always)]
+fn first_non_finite_impl(samples: &[f64]) -> Option<usize> {
+    let mut acc = [0.0f64; 2 * LANES];
+    let chunks = samples.chunks_exact(2 * LANES);
+    let tail = chunks.remainder();
+    for c in chunks {
+        for j in 0..2 * LANES {
+            acc[j] += c[j] * 0.0;
+        }
+    }
+    let clean = acc.iter().chain(tail).all(|v| v.is_finite());
+    if clean {
+        None
+    } else {
+        samples.iter().position(|v| !v.is_finite())
+    }
 }

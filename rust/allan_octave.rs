@@ -260,33 +260,20 @@ impl Octave {
         None
     }
 
-    /// The deviation after `n` samples per axis, for `clusters` (those given to [`new`]).
+    /// The deviation after `n` samples per axis, for `clusters` (those given to [`Octave::new`]).
     pub(super) fn result(&self, clusters: &[Cluster], rate_hz: f64, n: u64) -> AllanResult {
-        let terms: Vec<u64> = clusters
-            .iter()
-            .map(|c| (n / c.m).saturating_sub(1))
-            .collect();
-        let adev = clusters
-            .iter()
-            .enumerate()
-            .map(|(ci, c)| {
-                let level = c.m.trailing_zeros() as usize;
-                self.axes
-                    .iter()
-                    .map(|ax| {
-                        let l = &ax.levels[level];
-                        super::deviation(l.sum, l.comp, terms[ci], c.m)
-                    })
-                    .collect()
-            })
-            .collect();
-        AllanResult {
-            clusters: clusters.to_vec(),
-            taus: clusters.iter().map(|c| c.m as f64 / rate_hz).collect(),
-            adev,
-            terms,
+        let levels = |a: usize, k: usize| {
+            let l = &self.axes[a].levels[k];
+            (l.sum, l.comp)
+        };
+        super::octave_result(
+            clusters,
+            rate_hz,
             n,
-        }
+            self.axes.len(),
+            |m| (n / m).saturating_sub(1),
+            levels,
+        )
     }
 }
 
