@@ -474,8 +474,9 @@ def notes(ins: dict[str, float]) -> list[str]:
                 "double (numpy, memory-bound: a few passes over the phase per tau); triaxcal "
                 "streams the samples in fixed memory, at octave taus as window sums (a "
                 "cascade of plain-double window sums about the mean of the first readings "
-                "for the overlapping deviation, a pyramid of double-double block sums for the "
-                "non-overlapping one), so that long clusters keep their digits (agreement "
+                "for the overlapping deviation, a pyramid of plain-double block sums about the "
+                "same mean, four axes of a row side by side, for the non-overlapping one), so "
+                "that long clusters keep their digits (agreement "
                 "1e-13..1e-12 with allantools).")
         if ins:
             o = STATS.get("oadev-1000000")

@@ -29,8 +29,9 @@
 //! The non-overlapping deviation (allantools' `adev`; [`Allan::non_overlapping`]) is the same
 //! sum with the starts `m` apart (`d = m`): a cluster then costs one term per `m` samples.
 //! When every size is a power of two (octave taus) it skips the phases: the terms are the
-//! differences of consecutive block sums, and a pyramid of double-double block sums (pairs of
-//! blocks of `m` make the blocks of `2m`) gives them all for about one addition per sample
+//! differences of consecutive block sums, and a pyramid of block sums (pairs of blocks of `m`
+//! make the blocks of `2m`; plain doubles about the mean of the first readings, up to four axes
+//! of a row side by side) gives them all for about one addition per sample
 //! (`allan_octave.rs`).
 //!
 //! The overlapping deviation at power-of-two sizes, every start, skips the phases too: each
@@ -265,8 +266,8 @@ impl Allan {
     /// clusters do not overlap.
     ///
     /// When every size is a power of two (octave taus), the deviation is computed from a
-    /// pyramid of block sums (see `allan_octave.rs`): the same terms, in double-double, at a
-    /// fraction of the work.
+    /// pyramid of block sums (see `allan_octave.rs`): the same terms, about the mean of the
+    /// first readings, at a fraction of the work.
     pub fn non_overlapping(rate_hz: f64, axes: usize, ms: &[u64]) -> Result<Allan> {
         Allan::non_overlapping_with(rate_hz, axes, ms, true)
     }

@@ -3,58 +3,77 @@
 //!
 //! With the starts `m` apart, the term of cluster `k` is `x_{(k+2)m} - 2 x_{(k+1)m} + x_{km} =
 //! B_{k+1} - B_k`, the difference of consecutive block sums `B_k = Σ_{j<m} (y_{km+j} - r)`
-//! (`r` the axis's first reading). When every cluster size is a power of two, the blocks of
-//! `2m` samples are the sums of pairs of blocks of `m`: level 0 holds the readings, level
-//! `j + 1` the sums of pairs of level `j`. The whole pyramid costs one addition per sample
-//! (`b/2 + b/4 + ...`), and the additions are independent, so they vectorise; the phase of
-//! the general path is a chain of dependent additions, one per sample.
+//! (`r` a reference reading of the axis, which every term cancels exactly). When every cluster
+//! size is a power of two, the blocks of `2m` samples are the sums of pairs of blocks of `m`:
+//! level 0 holds the readings, level `j + 1` the sums of pairs of level `j`. The whole pyramid
+//! costs one addition per sample (`b/2 + b/4 + ...`), and each level is read once, in order:
+//! for each pair of blocks, two differences squared and one sum.
 //!
-//! The blocks are double-double numbers (the rounded sum and the exact sum of its rounding
-//! errors), like the phases of the general path, so that long clusters keep their digits:
-//! `y - r` is split exactly (TwoSum), and each pair is added as double-double.
+//! Rows, not axes: a record holds up to four axes of one row (or of one block) side by side,
+//! so that one 256-bit operation serves every axis of a row. The readings are loaded four
+//! values at a time straight from the interleaved rows (for three axes, the fourth lane is
+//! the next row's first value, and is cleared); the levels above are runs of such records.
+//! Each group of up to four axes reads its rows once.
 //!
-//! Each axis keeps, per level, the last block (for the next difference) and a block waiting
-//! for its pair; the rest lives in two batch buffers. Axes are independent and run in
-//! parallel; the sums of each axis are made in a fixed order, so that the result does not
-//! depend on the number of threads.
+//! Digits: the block sums are plain doubles, but they are small: the reference removes the
+//! axis's level (its value is the mean of the first batch of readings, so a block holds the
+//! noise and drift of `m` samples, not `m × bias`), and pairwise sums round once per level,
+//! relative to the block made (`log2 m` roundings of `B_m` at most). The tests hold the
+//! pyramid within 1e-13 of the general path on data with a large bias and drift, and exact on
+//! integer readings on a bias of 2⁴⁰ (their differences from a reference near them are exact,
+//! and so are their sums while below 2⁵³ units of the last place).
+//!
+//! Each group keeps, per level, the last block (for the next difference) and a block waiting
+//! for its pair; the rest lives in two batch buffers. A long push is cut into pieces that run
+//! in parallel, each a pyramid of its own, joined in order; the sums are made in a fixed order,
+//! so that the result does not depend on the number of threads.
 
-use super::{AllanResult, Cluster, BATCH, LANES};
+use super::{kahan_add, AllanResult, Cluster, BATCH};
 
-/// Rows of a push from which the axes run on several threads.
+/// Axes per record (one 256-bit register of doubles).
+const W: usize = 4;
+
+/// Up to [`W`] axes of one row or one block, side by side (unused lanes hold 0).
+type Rec = [f64; W];
+
+/// Rows of a push from which groups of axes run on several threads.
 const PARALLEL_ROWS: usize = 4096;
 
-/// Batches an axis processes per task (see [`Octave::push_rows`]).
+/// Batches checked for NaN at a time (their rows stay in cache while every group reads them).
 const GROUP: usize = 4;
 
 /// The fewest rows in a piece (see [`Octave::push`]).
 const MIN_PIECE: usize = 1 << 16;
 
-/// One level of one axis.
+/// Records of a batch buffer: level 1 of a batch of `BATCH` rows, and one carried over.
+const SCRATCH: usize = BATCH / 2 + 1;
+
+/// One level of one group of axes.
 #[derive(Debug, Clone, Default)]
 struct Level {
-    /// The first block seen (hi, lo): where a piece joins the blocks before it.
-    first: Option<(f64, f64)>,
-    /// The last block seen (hi, lo): the next block's difference starts from it.
-    prev: Option<(f64, f64)>,
+    /// The first block seen: where a piece joins the blocks before it.
+    first: Option<Rec>,
+    /// The last block seen: the next block's difference starts from it.
+    prev: Option<Rec>,
     /// A block waiting for its pair (the next level's block is their sum).
-    pend: Option<(f64, f64)>,
-    /// Σ (B_{k+1} - B_k)², a Kahan sum and its compensation.
-    sum: f64,
-    comp: f64,
+    pend: Option<Rec>,
+    /// Σ (B_{k+1} - B_k)² per lane, a Kahan sum and its compensation.
+    sum: Rec,
+    comp: Rec,
 }
 
-/// Ping-pong buffers of one batch's blocks: (hi, lo) of the level read, of the level made.
+/// Ping-pong buffers of one batch's blocks: the level read, the level made.
 #[derive(Debug, Clone)]
 struct Scratch {
-    a: (Vec<f64>, Vec<f64>),
-    b: (Vec<f64>, Vec<f64>),
+    a: Vec<Rec>,
+    b: Vec<Rec>,
 }
 
 impl Scratch {
     fn new() -> Scratch {
         Scratch {
-            a: (vec![0.0; BATCH], vec![0.0; BATCH]),
-            b: (vec![0.0; BATCH], vec![0.0; BATCH]),
+            a: vec![[0.0; W]; SCRATCH],
+            b: vec![[0.0; W]; SCRATCH],
         }
     }
 }
@@ -64,12 +83,33 @@ thread_local! {
     static PIECE_SCRATCH: std::cell::RefCell<Option<Scratch>> = const { std::cell::RefCell::new(None) };
 }
 
-/// Everything about one axis.
+/// Up to [`W`] consecutive axes, `a0..a0 + w`.
 #[derive(Debug, Clone)]
-struct Axis {
-    reference: f64,
+struct Group {
+    a0: usize,
+    w: usize,
+    /// Per lane: the mean of the axis's first batch of readings (set by the first push).
+    reference: Option<Rec>,
     levels: Vec<Level>,
     scratch: Scratch,
+}
+
+/// Where a group's lanes are in a row, and what they subtract.
+#[derive(Debug, Clone, Copy)]
+struct Lanes {
+    a0: usize,
+    w: usize,
+    reference: Rec,
+}
+
+impl Group {
+    fn lanes(&self) -> Lanes {
+        Lanes {
+            a0: self.a0,
+            w: self.w,
+            reference: self.reference.unwrap_or([0.0; W]),
+        }
+    }
 }
 
 /// The pyramid accumulator of every axis.
@@ -77,7 +117,8 @@ struct Axis {
 pub(super) struct Octave {
     /// Per level (cluster size `2^level`): the index of the cluster it computes, if asked for.
     want: Vec<Option<usize>>,
-    axes: Vec<Axis>,
+    nax: usize,
+    groups: Vec<Group>,
 }
 
 impl Octave {
@@ -95,22 +136,25 @@ impl Octave {
         for (ci, c) in clusters.iter().enumerate() {
             want[c.m.trailing_zeros() as usize] = Some(ci);
         }
-        let axis = Axis {
-            reference: f64::NAN,
-            levels: vec![Level::default(); top + 1],
-            scratch: Scratch::new(),
-        };
-        Some(Octave {
-            want,
-            axes: vec![axis; nax],
-        })
+        let groups = (0..nax)
+            .step_by(W)
+            .map(|a0| Group {
+                a0,
+                w: W.min(nax - a0),
+                reference: None,
+                levels: vec![Level::default(); top + 1],
+                scratch: Scratch::new(),
+            })
+            .collect();
+        Some(Octave { want, nax, groups })
     }
 
     /// Bytes held (fixed at construction; a thread that runs pieces keeps one more batch of
     /// scratch, 512 KiB).
     pub(super) fn memory_bytes(&self) -> usize {
-        let per_axis = 4 * 8 * BATCH + self.want.len() * std::mem::size_of::<Level>();
-        per_axis * self.axes.len()
+        let per_group = 2 * SCRATCH * std::mem::size_of::<Rec>()
+            + self.want.len() * std::mem::size_of::<Level>();
+        per_group * self.groups.len()
     }
 
     /// Rows per piece: a multiple of the largest cluster size, so that no block of any level
@@ -122,14 +166,14 @@ impl Octave {
     /// Adds `rows` rows of `samples` (row-major) to axes that have seen `n` rows. Returns the
     /// index of the first NaN or infinite value, if any, having then added nothing.
     ///
-    /// The rows up to the next multiple of [`Octave::piece_rows`] extend the pyramid in place
+    /// The first push sets each axis's reference, from its first batch of readings. The rows
+    /// up to the next multiple of [`Octave::piece_rows`] extend the pyramid in place
     /// ([`Octave::push_rows`]). The rest is cut at the multiples into pieces, and each piece
-    /// of each axis starts a pyramid of its own, so that the pieces run on every core even
-    /// when there are fewer axes than cores. A piece starts and, but for the last, ends on a
-    /// boundary of every level's blocks, so it joins the pyramid before it by one difference
-    /// per level (its first block less the last block before it) and its sums; the pieces
-    /// are joined in order, whatever the number of threads, so the result does not depend
-    /// on it.
+    /// starts a pyramid of its own, so that the pieces run on every core whatever the number
+    /// of axes. A piece starts and, but for the last, ends on a boundary of every level's
+    /// blocks, so it joins the pyramid before it by one difference per level (its first
+    /// block less the last block before it) and its sums; the pieces are joined in order,
+    /// whatever the number of threads, so the result does not depend on it.
     pub(super) fn push(
         &mut self,
         samples: &[f64],
@@ -137,66 +181,92 @@ impl Octave {
         parallel: bool,
         n: u64,
     ) -> Option<usize> {
-        let piece = self.piece_rows();
-        let head = ((piece - n % piece) % piece).min(rows as u64) as usize;
-        let saved: Vec<(f64, Vec<Level>)> = self
-            .axes
+        if rows == 0 {
+            return None;
+        }
+        let saved: Vec<(Option<Rec>, Vec<Level>)> = self
+            .groups
             .iter()
-            .map(|a| (a.reference, a.levels.clone()))
+            .map(|g| (g.reference, g.levels.clone()))
             .collect();
-        let bad = self.push_rows(samples, head, parallel).or_else(|| {
-            if head == rows {
-                return None;
-            }
-            self.push_pieces(samples, head, rows, piece as usize, parallel)
+        let bad = self.set_references(samples, rows).or_else(|| {
+            let piece = self.piece_rows();
+            let head = ((piece - n % piece) % piece).min(rows as u64) as usize;
+            self.push_rows(samples, head, parallel).or_else(|| {
+                if head == rows {
+                    return None;
+                }
+                self.push_pieces(samples, head, rows, piece as usize, parallel)
+            })
         });
         if bad.is_some() {
-            for (ax, (r, levels)) in self.axes.iter_mut().zip(saved) {
-                ax.reference = r;
-                ax.levels = levels;
+            for (g, (r, levels)) in self.groups.iter_mut().zip(saved) {
+                g.reference = r;
+                g.levels = levels;
             }
         }
         bad
     }
 
-    /// Extends each axis's pyramid by the first `rows` rows, a batch at a time (its rows stay
-    /// in cache while every axis reads them), the axes of a batch in parallel. Returns the
-    /// index of the first NaN or infinite value, if any (the caller undoes the push).
+    /// Sets the references not yet set: per axis, the mean of the first batch of rows (each
+    /// reading divided first, so that no sum overflows). Returns the index of the first NaN or
+    /// infinite value among those rows, if any.
+    fn set_references(&mut self, samples: &[f64], rows: usize) -> Option<usize> {
+        if self.groups.iter().all(|g| g.reference.is_some()) {
+            return None;
+        }
+        let b = rows.min(BATCH);
+        let nax = self.nax;
+        if let Some(i) = super::first_non_finite(&samples[..b * nax]) {
+            return Some(i);
+        }
+        for g in &mut self.groups {
+            let mut r = [0.0; W];
+            for (j, rj) in r[..g.w].iter_mut().enumerate() {
+                *rj = (0..b)
+                    .map(|t| samples[t * nax + g.a0 + j] / b as f64)
+                    .sum();
+            }
+            g.reference = Some(r);
+        }
+        None
+    }
+
+    /// Extends each group's pyramid by the first `rows` rows, a batch at a time, the groups
+    /// of a batch in parallel when there are several. Returns the index of the first NaN or
+    /// infinite value, if any (the caller undoes the push).
     fn push_rows(&mut self, samples: &[f64], rows: usize, parallel: bool) -> Option<usize> {
-        let nax = self.axes.len();
-        let parallel = parallel && nax > 1 && rows >= PARALLEL_ROWS;
+        let nax = self.nax;
+        let parallel = parallel && self.groups.len() > 1 && rows >= PARALLEL_ROWS;
         let want = &self.want;
         let mut start = 0;
         while start < rows {
-            // a group of batches per task: fewer wake-ups of the thread pool, while the
-            // group's rows still fit in the shared cache for the other axes
             let g = (GROUP * BATCH).min(rows - start);
             if let Some(i) = super::first_non_finite(&samples[start * nax..(start + g) * nax]) {
                 return Some(start * nax + i);
             }
-            let run = |(a, ax): (usize, &mut Axis)| {
+            let run = |gr: &mut Group| {
+                let lanes = gr.lanes();
                 let mut s = start;
                 while s < start + g {
                     let b = BATCH.min(start + g - s);
-                    let col = &samples[s * nax + a..];
-                    let (r, levels) = (&mut ax.reference, &mut ax.levels);
-                    push_batch(r, levels, &mut ax.scratch, want, col, nax, b);
+                    push_batch(&mut gr.levels, &mut gr.scratch, want, samples, nax, lanes, s, b);
                     s += b;
                 }
             };
             if parallel {
                 use rayon::prelude::*;
-                self.axes.par_iter_mut().enumerate().for_each(run);
+                self.groups.par_iter_mut().for_each(run);
             } else {
-                self.axes.iter_mut().enumerate().for_each(run);
+                self.groups.iter_mut().for_each(run);
             }
             start += g;
         }
         None
     }
 
-    /// Rows `from..rows` (`from` on a piece boundary): a fresh pyramid per piece and axis,
-    /// then each joined to its axis's, in order. Returns the index of the first NaN or
+    /// Rows `from..rows` (`from` on a piece boundary): a fresh pyramid per piece and group,
+    /// then each joined to its group's, in order. Returns the index of the first NaN or
     /// infinite value, if any, having then joined nothing.
     fn push_pieces(
         &mut self,
@@ -206,22 +276,17 @@ impl Octave {
         piece: usize,
         parallel: bool,
     ) -> Option<usize> {
-        let nax = self.axes.len();
-        for (a, ax) in self.axes.iter_mut().enumerate() {
-            if ax.reference.is_nan() {
-                ax.reference = samples[from * nax + a];
-            }
-        }
+        let nax = self.nax;
         let starts: Vec<usize> = (from..rows).step_by(piece).collect();
-        let (want, axes) = (&self.want, &self.axes);
-        // a piece's axes take turns on each group of its batches, while the group's rows are
-        // in this core's cache
+        let want = &self.want;
+        let lanes: Vec<Lanes> = self.groups.iter().map(Group::lanes).collect();
+        // a piece's groups take turns on each group of its batches, while the rows are in
+        // this core's cache
         let run = |&s: &usize| -> Result<Vec<Vec<Level>>, usize> {
             PIECE_SCRATCH.with(|cell| {
                 let mut cell = cell.borrow_mut();
                 let scratch = cell.get_or_insert_with(Scratch::new);
-                let mut refs: Vec<f64> = axes.iter().map(|a| a.reference).collect();
-                let mut levels = vec![vec![Level::default(); want.len()]; nax];
+                let mut levels = vec![vec![Level::default(); want.len()]; lanes.len()];
                 let end = (s + piece).min(rows);
                 let mut at = s;
                 while at < end {
@@ -229,11 +294,11 @@ impl Octave {
                     if let Some(i) = super::first_non_finite(&samples[at * nax..(at + g) * nax]) {
                         return Err(at * nax + i);
                     }
-                    for (a, (r, lv)) in refs.iter_mut().zip(levels.iter_mut()).enumerate() {
+                    for (ln, lv) in lanes.iter().zip(levels.iter_mut()) {
                         let mut q = at;
                         while q < at + g {
                             let b = BATCH.min(at + g - q);
-                            push_batch(r, lv, scratch, want, &samples[q * nax + a..], nax, b);
+                            push_batch(lv, scratch, want, samples, nax, *ln, q, b);
                             q += b;
                         }
                     }
@@ -253,8 +318,8 @@ impl Octave {
             return Some(i);
         }
         for d in done.into_iter().flatten() {
-            for (ax, levels) in self.axes.iter_mut().zip(d) {
-                join(&mut ax.levels, levels, &self.want);
+            for (g, levels) in self.groups.iter_mut().zip(d) {
+                join(&mut g.levels, levels, want);
             }
         }
         None
@@ -263,14 +328,14 @@ impl Octave {
     /// The deviation after `n` samples per axis, for `clusters` (those given to [`Octave::new`]).
     pub(super) fn result(&self, clusters: &[Cluster], rate_hz: f64, n: u64) -> AllanResult {
         let levels = |a: usize, k: usize| {
-            let l = &self.axes[a].levels[k];
-            (l.sum, l.comp)
+            let l = &self.groups[a / W].levels[k];
+            (l.sum[a % W], l.comp[a % W])
         };
         super::octave_result(
             clusters,
             rate_hz,
             n,
-            self.axes.len(),
+            self.nax,
             |m| (n / m).saturating_sub(1),
             levels,
         )
@@ -281,17 +346,19 @@ impl Octave {
 /// blocks) to the pyramid of the rows before it (`run`, which ends on that boundary).
 fn join(run: &mut [Level], piece: Vec<Level>, want: &[Option<usize>]) {
     for (j, (r, p)) in run.iter_mut().zip(piece).enumerate() {
-        let Some((fh, fl)) = p.first else {
+        let Some(first) = p.first else {
             // the piece is too short to make a block of this level, or of any above it
             break;
         };
         debug_assert!(r.pend.is_none());
         if want[j].is_some() {
-            let joint = r.prev.map_or(0.0, |(ph, pl)| {
-                let d = (fh - ph) + (fl - pl);
-                d * d
-            });
-            kahan(r, (p.sum - p.comp) + joint);
+            for l in 0..W {
+                let joint = r.prev.map_or(0.0, |prev| {
+                    let d = first[l] - prev[l];
+                    d * d
+                });
+                kahan_add(&mut r.sum[l], &mut r.comp[l], (p.sum[l] - p.comp[l]) + joint);
+            }
         }
         r.first = r.first.or(p.first);
         r.prev = p.prev;
@@ -299,280 +366,178 @@ fn join(run: &mut [Level], piece: Vec<Level>, want: &[Option<usize>]) {
     }
 }
 
-/// One batch of `b` rows of one axis: its readings `col[0], col[nax], ...` become level 0,
-/// then each level adds its differences and pairs its blocks into the next (dispatches to
-/// the AVX2 build where the CPU has it).
+/// One batch of `b` rows, from row `row0` of `samples`, of one group of axes: its readings
+/// become level 0, then each level adds its differences and pairs its blocks into the next
+/// (dispatches to the AVX2 build where the CPU has it).
+#[allow(clippy::too_many_arguments)]
 fn push_batch(
-    reference: &mut f64,
     levels: &mut [Level],
     scratch: &mut Scratch,
     want: &[Option<usize>],
-    col: &[f64],
+    samples: &[f64],
     nax: usize,
+    lanes: Lanes,
+    row0: usize,
     b: usize,
 ) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::has_avx2_fma() {
         return crate::simd::avx2_call!(push_batch_avx2(
-            reference, levels, scratch, want, col, nax, b
+            levels, scratch, want, samples, nax, lanes, row0, b
         ));
     }
-    push_batch_impl(reference, levels, scratch, want, col, nax, b)
+    push_batch_impl(levels, scratch, want, samples, nax, lanes, row0, b)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
 fn push_batch_avx2(
-    reference: &mut f64,
     levels: &mut [Level],
     scratch: &mut Scratch,
     want: &[Option<usize>],
-    col: &[f64],
+    samples: &[f64],
     nax: usize,
+    lanes: Lanes,
+    row0: usize,
     b: usize,
 ) {
-    push_batch_impl(reference, levels, scratch, want, col, nax, b)
+    push_batch_impl(levels, scratch, want, samples, nax, lanes, row0, b)
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn push_batch_impl(
-    reference: &mut f64,
     levels: &mut [Level],
     scratch: &mut Scratch,
     want: &[Option<usize>],
-    col: &[f64],
+    samples: &[f64],
     nax: usize,
+    lanes: Lanes,
+    row0: usize,
     b: usize,
 ) {
-    if reference.is_nan() {
-        *reference = col[0];
-    }
     let Scratch { a, b: other } = scratch;
     let (mut src, mut dst) = (a, other);
-    // level 0: the readings less the reference (rounded once, as the phases of the general
-    // path are); its blocks have no error part, so it is differenced and paired on its own.
-    // The readings are split into the even and odd members of this batch's pairs (after the
-    // one that completes a pair left by the last batch), so that the pairs and differences
-    // are read from two contiguous runs
-    let level = &mut levels[0];
-    let carried = level.pend.take();
-    let i = usize::from(carried.is_some());
-    let p = (b - i) / 2;
-    let (even, odd) = dst.0.split_at_mut(BATCH / 2);
-    let (even, odd) = (&mut even[..p], &mut odd[..p]);
-    readings_split(&col[i * nax..], nax, *reference, even, odd);
-    let first = col[0] - *reference;
-    let last = col[(b - 1) * nax] - *reference;
-    if want[0].is_some() {
-        let mut s = level
-            .prev
-            .map_or(0.0, |(ph, _)| (first - ph) * (first - ph));
-        if p == 0 {
-            if b == 2 {
-                s += (last - first) * (last - first);
-            }
-        } else {
-            if i == 1 {
-                s += (even[0] - first) * (even[0] - first);
-            }
-            if i + 2 * p < b {
-                s += (last - odd[p - 1]) * (last - odd[p - 1]);
-            }
-        }
-        kahan(level, s + diffs_split(even, odd));
-    }
-    level.first = level.first.or(Some((first, 0.0)));
-    level.prev = Some((last, 0.0));
-    if want.len() == 1 {
-        return;
-    }
-    let mut n = 0;
-    if let Some((ph, _)) = carried {
-        (src.0[0], src.1[0]) = two_sum(ph, first);
-        n = 1;
-    }
-    for (q, (e, o)) in even.iter().zip(odd.iter()).enumerate() {
-        (src.0[n + q], src.1[n + q]) = two_sum(*e, *o);
-    }
-    n += p;
-    if i + 2 * p < b {
-        level.pend = Some((last, 0.0));
-    }
-    for (j, level) in levels.iter_mut().enumerate().skip(1) {
+    let mut n = match lanes.w {
+        1 => readings::<1>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
+        2 => readings::<2>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
+        3 => readings::<3>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
+        _ => readings::<W>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
+    };
+    for j in 1..want.len() {
         if n == 0 {
             break;
         }
-        let (h, l) = (&src.0[..n], &src.1[..n]);
-        if want[j].is_some() {
-            kahan(level, squares(level.prev, h, l));
-        }
-        level.first = level.first.or(Some((h[0], l[0])));
-        level.prev = Some((h[n - 1], l[n - 1]));
-        if j + 1 == want.len() {
-            break;
-        }
-        n = pairs(&mut level.pend, h, l, &mut dst.0, &mut dst.1);
+        let read = &src[..n];
+        let i0 = usize::from(levels[j].pend.is_some()).min(n);
+        let pairs = read[i0..].chunks_exact(2).map(|c| (c[0], c[1]));
+        n = level_pass(&mut levels[j], want[j].is_some(), n, |i| read[i], pairs, dst);
         std::mem::swap(&mut src, &mut dst);
     }
 }
 
-/// Adds a batch's sum of squares to a level's total.
+/// Level 0 of a batch: the `b` rows from `row0`, the `U` axes of the group (`U` = `lanes.w`)
+/// less their references (see [`level_pass`]).
 #[inline(always)]
-fn kahan(level: &mut Level, s: f64) {
-    super::kahan_add(&mut level.sum, &mut level.comp, s);
-}
-
-/// `y - r` of the readings `col[2 q nax]` (into `even`) and `col[(2 q + 1) nax]` (into
-/// `odd`).
-#[inline(always)]
-fn readings_split(col: &[f64], nax: usize, r: f64, even: &mut [f64], odd: &mut [f64]) {
-    match nax {
-        1 => split_of::<1>(col, r, even, odd),
-        2 => split_of::<2>(col, r, even, odd),
-        3 => split_of::<3>(col, r, even, odd),
-        _ => {
-            for (q, (e, o)) in even.iter_mut().zip(odd.iter_mut()).enumerate() {
-                *e = col[2 * q * nax] - r;
-                *o = col[(2 * q + 1) * nax] - r;
-            }
-        }
-    }
-}
-
-#[inline(always)]
-fn split_of<const K: usize>(col: &[f64], r: f64, even: &mut [f64], odd: &mut [f64]) {
-    let p = even.len();
-    if p == 0 {
-        return;
-    }
-    // the last pair's second reading may end the slice: it is read on its own
-    for ((e, o), y) in even[..p - 1]
-        .iter_mut()
-        .zip(odd[..p - 1].iter_mut())
-        .zip(col[..2 * (p - 1) * K].chunks_exact(2 * K))
-    {
-        *e = y[0] - r;
-        *o = y[K] - r;
-    }
-    even[p - 1] = col[2 * (p - 1) * K] - r;
-    odd[p - 1] = col[(2 * p - 1) * K] - r;
-}
-
-/// Σ (o_q - e_q)² + Σ (e_{q+1} - o_q)²: the differences of consecutive readings, split into
-/// the even and odd members of their pairs (level 0, no error parts).
-#[inline(always)]
-fn diffs_split(even: &[f64], odd: &[f64]) -> f64 {
-    let p = even.len().min(odd.len());
-    if p == 0 {
-        return 0.0;
-    }
-    let m = p - 1;
-    let full = m / LANES * LANES;
-    let mut acc = [0.0f64; LANES];
-    for ((e, e1), o) in even[..full]
-        .chunks_exact(LANES)
-        .zip(even[1..=full].chunks_exact(LANES))
-        .zip(odd[..full].chunks_exact(LANES))
-    {
-        for j in 0..LANES {
-            let d = o[j] - e[j];
-            let d1 = e1[j] - o[j];
-            acc[j] += d * d;
-            acc[j] += d1 * d1;
-        }
-    }
-    let mut tail = 0.0;
-    for q in full..m {
-        let d = odd[q] - even[q];
-        let d1 = even[q + 1] - odd[q];
-        tail += d * d;
-        tail += d1 * d1;
-    }
-    let d = odd[m] - even[m];
-    acc.iter().sum::<f64>() + tail + d * d
-}
-
-/// `a + b` as the rounded sum and its exact error (Knuth's TwoSum).
-#[inline(always)]
-fn two_sum(a: f64, b: f64) -> (f64, f64) {
-    let s = a + b;
-    let bp = s - a;
-    (s, (a - (s - bp)) + (b - bp))
-}
-
-/// The double-double sum of two double-double numbers, normalised.
-#[inline(always)]
-fn dd_add(ah: f64, al: f64, bh: f64, bl: f64) -> (f64, f64) {
-    let (s, e) = two_sum(ah, bh);
-    let e = e + (al + bl);
-    let hi = s + e;
-    (hi, e - (hi - s))
-}
-
-/// Pairs the blocks `(h, l)` (after the one waiting in `pend`, if any) into `oh`, `ol`;
-/// returns how many were made, and leaves an unpaired last block in `pend`.
-#[inline(always)]
-fn pairs(
-    pend: &mut Option<(f64, f64)>,
-    h: &[f64],
-    l: &[f64],
-    oh: &mut [f64],
-    ol: &mut [f64],
+#[allow(clippy::too_many_arguments)]
+fn readings<const U: usize>(
+    lv: &mut Level,
+    summed: bool,
+    samples: &[f64],
+    nax: usize,
+    lanes: Lanes,
+    row0: usize,
+    b: usize,
+    out: &mut [Rec],
 ) -> usize {
-    let n = h.len();
-    let (mut i, mut k) = (0, 0);
-    if let Some((ph, pl)) = pend.take() {
-        (oh[0], ol[0]) = dd_add(ph, pl, h[0], l[0]);
-        (i, k) = (1, 1);
-    }
-    let p = (n - i) / 2;
-    let (hs, ls) = (&h[i..i + 2 * p], &l[i..i + 2 * p]);
-    let (oh, ol) = (&mut oh[k..k + p], &mut ol[k..k + p]);
-    for q in 0..p {
-        (oh[q], ol[q]) = dd_add(hs[2 * q], ls[2 * q], hs[2 * q + 1], ls[2 * q + 1]);
-    }
-    if i + 2 * p < n {
-        *pend = Some((h[n - 1], l[n - 1]));
-    }
-    k + p
+    let (a0, r) = (lanes.a0, lanes.reference);
+    let at = |v: &[f64]| -> Rec {
+        let mut x = [0.0; W];
+        for j in 0..U {
+            x[j] = v[j] - r[j];
+        }
+        x
+    };
+    let row = |t: usize| at(&samples[(row0 + t) * nax + a0..][..U]);
+    // the pairs of rows from the first one not taken by a waiting block
+    let i0 = usize::from(lv.pend.is_some()).min(b);
+    let p = (b - i0) / 2;
+    let from = (row0 + i0) * nax;
+    let pairs = samples[from..from + 2 * p * nax]
+        .chunks_exact(2 * nax)
+        .map(|c| (at(&c[a0..a0 + U]), at(&c[nax + a0..nax + a0 + U])));
+    level_pass(lv, summed, b, row, pairs, out)
 }
 
-/// Σ (B_{i} - B_{i-1})² over the blocks `(h, l)`, the first against `prev` (if any).
+/// One level's `n` new blocks, `block(i)`: adds the squares of their differences (the first
+/// against the level's last block) to the level's sums when `summed`, and writes the sums of
+/// their pairs (the first with the block waiting for its pair, if any) to `out`. `pairs` gives
+/// the blocks `(i, i + 1)` for `i` from 1 if a block was waiting, else 0, in steps of 2. Returns
+/// how many it wrote; an unpaired last block waits in `pend`.
 #[inline(always)]
-fn squares(prev: Option<(f64, f64)>, h: &[f64], l: &[f64]) -> f64 {
-    let first = prev.map_or(0.0, |(ph, pl)| {
-        let d = (h[0] - ph) + (l[0] - pl);
-        d * d
-    });
-    first + diffs_impl(h, l)
-}
-
-/// Σ ((h_i - h_{i-1}) + (l_i - l_{i-1}))² for i ≥ 1.
-#[inline(always)]
-fn diffs_impl(h: &[f64], l: &[f64]) -> f64 {
-    let n = h.len().min(l.len());
-    if n < 2 {
-        return 0.0;
+fn level_pass(
+    lv: &mut Level,
+    summed: bool,
+    n: usize,
+    block: impl Fn(usize) -> Rec,
+    pairs: impl Iterator<Item = (Rec, Rec)>,
+    out: &mut [Rec],
+) -> usize {
+    if n == 0 {
+        return 0;
     }
-    let (h1, h0, l1, l0) = (&h[1..n], &h[..n - 1], &l[1..n], &l[..n - 1]);
-    let m = n - 1;
-    let full = m / LANES * LANES;
-    let mut acc = [0.0f64; LANES];
-    for (((a1, a0), b1), b0) in h1[..full]
-        .chunks_exact(LANES)
-        .zip(h0[..full].chunks_exact(LANES))
-        .zip(l1[..full].chunks_exact(LANES))
-        .zip(l0[..full].chunks_exact(LANES))
-    {
-        for j in 0..LANES {
-            let d = (a1[j] - a0[j]) + (b1[j] - b0[j]);
-            acc[j] += d * d;
+    let mut acc0 = [0.0; W];
+    let mut acc1 = [0.0; W];
+    let first = block(0);
+    if let Some(p) = lv.prev {
+        square_add(&mut acc0, first, p);
+    }
+    lv.first = lv.first.or(Some(first));
+    // the pairs start at block 0 with `last` = block 0 (a difference of 0) unless block 0
+    // completes the waiting pair
+    let mut last = first;
+    let mut i = 0;
+    if let Some(p) = lv.pend.take() {
+        out[0] = add(p, first);
+        i = 1;
+    }
+    let made = (n - i) / 2;
+    for ((e, o), slot) in pairs.zip(out[i..i + made].iter_mut()) {
+        square_add(&mut acc0, e, last);
+        square_add(&mut acc1, o, e);
+        *slot = add(e, o);
+        last = o;
+    }
+    if (n - i) % 2 == 1 {
+        let e = block(n - 1);
+        square_add(&mut acc0, e, last);
+        lv.pend = Some(e);
+        last = e;
+    }
+    lv.prev = Some(last);
+    if summed {
+        for j in 0..W {
+            kahan_add(&mut lv.sum[j], &mut lv.comp[j], acc0[j] + acc1[j]);
         }
     }
-    let mut tail = 0.0;
-    for i in full..m {
-        let d = (h1[i] - h0[i]) + (l1[i] - l0[i]);
-        tail += d * d;
+    i + made
+}
+
+#[inline(always)]
+fn add(a: Rec, b: Rec) -> Rec {
+    let mut s = [0.0; W];
+    for j in 0..W {
+        s[j] = a[j] + b[j];
     }
-    acc.iter().sum::<f64>() + tail
+    s
+}
+
+/// `acc += (a - b)²`, lane by lane.
+#[inline(always)]
+fn square_add(acc: &mut Rec, a: Rec, b: Rec) {
+    for j in 0..W {
+        let d = a[j] - b[j];
+        acc[j] += d * d;
+    }
 }

@@ -269,6 +269,51 @@ fn the_pyramid_matches_the_general_path_on_three_axes_in_parallel() {
 }
 
 #[test]
+fn the_pyramid_matches_the_general_path_for_any_number_of_axes() {
+    // axes are taken four to a record: one to seven axes make full and partial groups; pushes
+    // of odd lengths leave blocks waiting for their pairs, and end on rows whose four-wide
+    // load would run past the slice
+    let n = 2 * BATCH + 3001;
+    let ms: Vec<u64> = (0..13).map(|k| 1u64 << k).collect();
+    for nax in 1..=7 {
+        let rows: Vec<f64> = lcg(nax * n, 11 + nax as u64)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let (row, axis) = (i / nax, i % nax);
+                1e3 * axis as f64 - 7.0 + v * (1 + axis) as f64 + row as f64 * 1e-5 * axis as f64
+            })
+            .collect();
+        let mut general = Allan::non_overlapping_with(10.0, nax, &ms, false).unwrap();
+        general.push(&rows).unwrap();
+        let want = general.result();
+        for cuts in [vec![n], vec![1, 2, 777, BATCH + 1, n], vec![4999, n - 1, n]] {
+            let mut acc = Allan::non_overlapping(10.0, nax, &ms).unwrap();
+            assert!(acc.octave.is_some());
+            let mut from = 0;
+            for &to in &cuts {
+                acc.push(&rows[nax * from..nax * to]).unwrap();
+                from = to;
+            }
+            let r = acc.result();
+            assert_eq!(r.terms, want.terms);
+            for (ci, dev) in r.adev.iter().enumerate() {
+                assert_eq!(dev.len(), nax);
+                for k in 0..nax {
+                    let w = want.adev[ci][k];
+                    assert!(
+                        (dev[k] - w).abs() <= 1e-13 * w,
+                        "{nax} axes, cuts {cuts:?}, m {}, axis {k}: {} vs {w}",
+                        ms[ci],
+                        dev[k]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn pieces_join_to_the_general_path_whatever_the_threads_and_the_chunks() {
     // 5 pieces of 2^16 rows and a short one; pushes that start and end off the boundaries
     let n = 5 * (1 << 16) + 9001;
