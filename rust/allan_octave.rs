@@ -223,9 +223,7 @@ impl Octave {
         for g in &mut self.groups {
             let mut r = [0.0; W];
             for (j, rj) in r[..g.w].iter_mut().enumerate() {
-                *rj = (0..b)
-                    .map(|t| samples[t * nax + g.a0 + j] / b as f64)
-                    .sum();
+                *rj = (0..b).map(|t| samples[t * nax + g.a0 + j] / b as f64).sum();
             }
             g.reference = Some(r);
         }
@@ -250,7 +248,16 @@ impl Octave {
                 let mut s = start;
                 while s < start + g {
                     let b = BATCH.min(start + g - s);
-                    push_batch(&mut gr.levels, &mut gr.scratch, want, samples, nax, lanes, s, b);
+                    push_batch(
+                        &mut gr.levels,
+                        &mut gr.scratch,
+                        want,
+                        samples,
+                        nax,
+                        lanes,
+                        s,
+                        b,
+                    );
                     s += b;
                 }
             };
@@ -357,7 +364,11 @@ fn join(run: &mut [Level], piece: Vec<Level>, want: &[Option<usize>]) {
                     let d = first[l] - prev[l];
                     d * d
                 });
-                kahan_add(&mut r.sum[l], &mut r.comp[l], (p.sum[l] - p.comp[l]) + joint);
+                kahan_add(
+                    &mut r.sum[l],
+                    &mut r.comp[l],
+                    (p.sum[l] - p.comp[l]) + joint,
+                );
             }
         }
         r.first = r.first.or(p.first);
@@ -420,10 +431,46 @@ fn push_batch_impl(
     let Scratch { a, b: other } = scratch;
     let (mut src, mut dst) = (a, other);
     let mut n = match lanes.w {
-        1 => readings::<1>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
-        2 => readings::<2>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
-        3 => readings::<3>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
-        _ => readings::<W>(&mut levels[0], want[0].is_some(), samples, nax, lanes, row0, b, src),
+        1 => readings::<1>(
+            &mut levels[0],
+            want[0].is_some(),
+            samples,
+            nax,
+            lanes,
+            row0,
+            b,
+            src,
+        ),
+        2 => readings::<2>(
+            &mut levels[0],
+            want[0].is_some(),
+            samples,
+            nax,
+            lanes,
+            row0,
+            b,
+            src,
+        ),
+        3 => readings::<3>(
+            &mut levels[0],
+            want[0].is_some(),
+            samples,
+            nax,
+            lanes,
+            row0,
+            b,
+            src,
+        ),
+        _ => readings::<W>(
+            &mut levels[0],
+            want[0].is_some(),
+            samples,
+            nax,
+            lanes,
+            row0,
+            b,
+            src,
+        ),
     };
     for j in 1..want.len() {
         if n == 0 {
@@ -432,7 +479,14 @@ fn push_batch_impl(
         let read = &src[..n];
         let i0 = usize::from(levels[j].pend.is_some()).min(n);
         let pairs = read[i0..].chunks_exact(2).map(|c| (c[0], c[1]));
-        n = level_pass(&mut levels[j], want[j].is_some(), n, |i| read[i], pairs, dst);
+        n = level_pass(
+            &mut levels[j],
+            want[j].is_some(),
+            n,
+            |i| read[i],
+            pairs,
+            dst,
+        );
         std::mem::swap(&mut src, &mut dst);
     }
 }
