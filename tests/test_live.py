@@ -437,7 +437,11 @@ def test_send_goes_over_the_open_port_with_the_echo_check(tmp_path):
 
 def _spawn(args, cwd):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "python"))
-    code = "import sys; from triaxcal.cli import main; sys.exit(main())"
+    # Ctrl-C as at a terminal: a test run started in the background of a non-interactive
+    # shell has SIGINT ignored, and a child inherits that (Python then raises no
+    # KeyboardInterrupt, and a command waiting for Ctrl-C waits for ever)
+    code = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            "from triaxcal.cli import main; sys.exit(main())")
     return subprocess.Popen([sys.executable, "-c", code, *args], cwd=cwd, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
