@@ -58,7 +58,7 @@ mod kernels;
 #[path = "allan_octave.rs"]
 mod octave;
 
-use kernels::{first_non_finite, gather, phases, sum_terms};
+use kernels::{first_batch_mean, first_non_finite, gather, phases, sum_terms};
 
 /// Rows of a chunk processed together (phases are computed for a batch, then every cluster
 /// reads them as contiguous slices, which vectorises).

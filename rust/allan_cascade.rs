@@ -324,8 +324,7 @@ impl Task<'_> {
 fn less_reference(reference: &mut f64, col: &[f64], nax: usize, out: &mut [f64]) {
     let b = out.len();
     if reference.is_nan() {
-        // each reading divided first: no overflow whatever the readings' size
-        *reference = (0..b).map(|j| col[j * nax] / b as f64).sum::<f64>();
+        *reference = super::first_batch_mean(col, nax, b);
     }
     let r = *reference;
     let col = &col[..(b - 1) * nax + 1];

@@ -173,6 +173,13 @@ fn run_impl(h2: &[f64], h1: &[f64], h0: &[f64], l2: &[f64], l1: &[f64], l0: &[f6
     acc.iter().sum::<f64>() + tail
 }
 
+/// The mean of `col[0], col[nax], ..., col[(b - 1) nax]`: the reference of an axis taken from
+/// its first batch of readings, so that window and block sums hold the noise, not the level
+/// (each reading divided first: no overflow whatever the readings' size).
+pub(super) fn first_batch_mean(col: &[f64], nax: usize, b: usize) -> f64 {
+    (0..b).map(|j| col[j * nax] / b as f64).sum()
+}
+
 /// The index of the first NaN or infinite value, if any. The common case, all finite, is one
 /// vectorised pass: `v * 0` is 0 for a finite `v` and NaN otherwise (AVX2 where the CPU has
 /// it: the samples are read once per push, and this pass is a tenth of a non-overlapping

@@ -112,6 +112,16 @@ impl Group {
     }
 }
 
+/// A batch of rows for one group: `b` rows of `samples` (row-major, `nax` axes) from `row0`.
+#[derive(Debug, Clone, Copy)]
+struct Rows<'a> {
+    samples: &'a [f64],
+    nax: usize,
+    lanes: Lanes,
+    row0: usize,
+    b: usize,
+}
+
 /// The pyramid accumulator of every axis.
 #[derive(Debug, Clone)]
 pub(super) struct Octave {
@@ -223,7 +233,7 @@ impl Octave {
         for g in &mut self.groups {
             let mut r = [0.0; W];
             for (j, rj) in r[..g.w].iter_mut().enumerate() {
-                *rj = (0..b).map(|t| samples[t * nax + g.a0 + j] / b as f64).sum();
+                *rj = super::first_batch_mean(&samples[g.a0 + j..], nax, b);
             }
             g.reference = Some(r);
         }
@@ -248,16 +258,14 @@ impl Octave {
                 let mut s = start;
                 while s < start + g {
                     let b = BATCH.min(start + g - s);
-                    push_batch(
-                        &mut gr.levels,
-                        &mut gr.scratch,
-                        want,
+                    let rows = Rows {
                         samples,
                         nax,
                         lanes,
-                        s,
+                        row0: s,
                         b,
-                    );
+                    };
+                    push_batch(&mut gr.levels, &mut gr.scratch, want, rows);
                     s += b;
                 }
             };
@@ -305,7 +313,14 @@ impl Octave {
                         let mut q = at;
                         while q < at + g {
                             let b = BATCH.min(at + g - q);
-                            push_batch(lv, scratch, want, samples, nax, *ln, q, b);
+                            let batch = Rows {
+                                samples,
+                                nax,
+                                lanes: *ln,
+                                row0: q,
+                                b,
+                            };
+                            push_batch(lv, scratch, want, batch);
                             q += b;
                         }
                     }
@@ -377,100 +392,43 @@ fn join(run: &mut [Level], piece: Vec<Level>, want: &[Option<usize>]) {
     }
 }
 
-/// One batch of `b` rows, from row `row0` of `samples`, of one group of axes: its readings
-/// become level 0, then each level adds its differences and pairs its blocks into the next
-/// (dispatches to the AVX2 build where the CPU has it).
-#[allow(clippy::too_many_arguments)]
-fn push_batch(
-    levels: &mut [Level],
-    scratch: &mut Scratch,
-    want: &[Option<usize>],
-    samples: &[f64],
-    nax: usize,
-    lanes: Lanes,
-    row0: usize,
-    b: usize,
-) {
+/// One batch of rows of one group of axes: its readings become level 0, then each level adds
+/// its differences and pairs its blocks into the next (dispatches to the AVX2 build where the
+/// CPU has it).
+fn push_batch(levels: &mut [Level], scratch: &mut Scratch, want: &[Option<usize>], rows: Rows) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::has_avx2_fma() {
-        return crate::simd::avx2_call!(push_batch_avx2(
-            levels, scratch, want, samples, nax, lanes, row0, b
-        ));
+        return crate::simd::avx2_call!(push_batch_avx2(levels, scratch, want, rows));
     }
-    push_batch_impl(levels, scratch, want, samples, nax, lanes, row0, b)
+    push_batch_impl(levels, scratch, want, rows)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 fn push_batch_avx2(
     levels: &mut [Level],
     scratch: &mut Scratch,
     want: &[Option<usize>],
-    samples: &[f64],
-    nax: usize,
-    lanes: Lanes,
-    row0: usize,
-    b: usize,
+    rows: Rows,
 ) {
-    push_batch_impl(levels, scratch, want, samples, nax, lanes, row0, b)
+    push_batch_impl(levels, scratch, want, rows)
 }
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn push_batch_impl(
     levels: &mut [Level],
     scratch: &mut Scratch,
     want: &[Option<usize>],
-    samples: &[f64],
-    nax: usize,
-    lanes: Lanes,
-    row0: usize,
-    b: usize,
+    rows: Rows,
 ) {
     let Scratch { a, b: other } = scratch;
     let (mut src, mut dst) = (a, other);
-    let mut n = match lanes.w {
-        1 => readings::<1>(
-            &mut levels[0],
-            want[0].is_some(),
-            samples,
-            nax,
-            lanes,
-            row0,
-            b,
-            src,
-        ),
-        2 => readings::<2>(
-            &mut levels[0],
-            want[0].is_some(),
-            samples,
-            nax,
-            lanes,
-            row0,
-            b,
-            src,
-        ),
-        3 => readings::<3>(
-            &mut levels[0],
-            want[0].is_some(),
-            samples,
-            nax,
-            lanes,
-            row0,
-            b,
-            src,
-        ),
-        _ => readings::<W>(
-            &mut levels[0],
-            want[0].is_some(),
-            samples,
-            nax,
-            lanes,
-            row0,
-            b,
-            src,
-        ),
+    let (lv, summed) = (&mut levels[0], want[0].is_some());
+    let mut n = match rows.lanes.w {
+        1 => readings::<1>(lv, summed, rows, src),
+        2 => readings::<2>(lv, summed, rows, src),
+        3 => readings::<3>(lv, summed, rows, src),
+        _ => readings::<W>(lv, summed, rows, src),
     };
     for j in 1..want.len() {
         if n == 0 {
@@ -491,20 +449,17 @@ fn push_batch_impl(
     }
 }
 
-/// Level 0 of a batch: the `b` rows from `row0`, the `U` axes of the group (`U` = `lanes.w`)
-/// less their references (see [`level_pass`]).
+/// Level 0 of a batch: its rows' `U` axes of the group (`U` = `lanes.w`) less their
+/// references (see [`level_pass`]).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn readings<const U: usize>(
-    lv: &mut Level,
-    summed: bool,
-    samples: &[f64],
-    nax: usize,
-    lanes: Lanes,
-    row0: usize,
-    b: usize,
-    out: &mut [Rec],
-) -> usize {
+fn readings<const U: usize>(lv: &mut Level, summed: bool, rows: Rows, out: &mut [Rec]) -> usize {
+    let Rows {
+        samples,
+        nax,
+        lanes,
+        row0,
+        b,
+    } = rows;
     let (a0, r) = (lanes.a0, lanes.reference);
     let at = |v: &[f64]| -> Rec {
         let mut x = [0.0; W];
