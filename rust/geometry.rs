@@ -86,26 +86,14 @@ pub fn scan(points: &[[f64; 3]], parallel: bool) -> Result<Scan> {
 }
 
 /// [`scan`] and, in the same pass (chunk by chunk, while each chunk is in cache), the points
-/// sorted into `K` lists by `pick`, whose bit `k` puts a point in list `k` (in their order):
-/// one read of the points where separate passes would read them again.
-pub fn scan_picking<const K: usize, F: Fn(&[f64; 3]) -> u32 + Sync>(
+/// sorted into `K` lists by `sort`, which appends the points of a chunk it picks to the lists
+/// (in their order): one read of the points where separate passes would read them again.
+pub fn scan_picking<const K: usize, F: Fn(&[[f64; 3]], &mut [Vec<[f64; 3]>; K]) + Sync>(
     points: &[[f64; 3]],
     parallel: bool,
-    pick: F,
+    sort: F,
 ) -> Result<(Scan, [Vec<[f64; 3]>; K])> {
     let p0 = points.first().copied().unwrap_or([0.0; 3]);
-    let sort = |c: &[[f64; 3]], lists: &mut [Vec<[f64; 3]>; K]| {
-        for p in c {
-            let bits = pick(p);
-            if bits != 0 {
-                for (k, list) in lists.iter_mut().enumerate() {
-                    if bits >> k & 1 == 1 {
-                        list.push(*p);
-                    }
-                }
-            }
-        }
-    };
     type Sums = ([f64; 3], [f64; 6], f64, f64);
     let add = |a: Sums, b: Sums| -> Sums {
         let mut s1 = a.0;

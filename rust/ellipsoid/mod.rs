@@ -325,13 +325,18 @@ pub fn fit_ellipsoid(points: &[[f64; 3]], opts: &FitOptions) -> Result<Ellipsoid
             0
         };
         let any = cut.max(curv_cut);
-        let (scan, lists) = geometry::scan_picking::<3, _>(points, opts.parallel, |p| {
-            let h = subsample::point_hash(p);
-            if h >= any {
-                return 0; // most points
-            }
-            u32::from(h < cut) | if h < curv_cut { 2 << (h & 1) } else { 0 }
-        })?;
+        let (scan, lists) =
+            geometry::scan_picking::<3, _>(points, opts.parallel, |chunk, lists| {
+                // most points hash above both cuts: screened four at a time
+                subsample::below_cut(chunk, any, |p, h| {
+                    if h < cut {
+                        lists[0].push(*p);
+                    }
+                    if h < curv_cut {
+                        lists[1 + (h & 1) as usize].push(*p);
+                    }
+                });
+            })?;
         (scan, Some(lists))
     } else {
         (geometry::scan(points, opts.parallel)?, None)

@@ -47,6 +47,29 @@ pub(super) fn point_hash(p: &[f64; 3]) -> u64 {
     (h ^ (h >> 32)).wrapping_mul(0xd6e8_feb8_6659_fd93)
 }
 
+/// Calls `f(p, point_hash(p))` for each point `p` of `points` (in order) whose hash is below
+/// `cut`: the hashes of four points at a time, then one test for all four (most groups have
+/// no point below the cut, and a test per point was a branch per point).
+pub(super) fn below_cut(points: &[[f64; 3]], cut: u64, mut f: impl FnMut(&[f64; 3], u64)) {
+    let (groups, rest) = points.as_chunks::<4>();
+    for g in groups {
+        let h: [u64; 4] = std::array::from_fn(|j| point_hash(&g[j]));
+        if h.iter().any(|&hj| hj < cut) {
+            for (p, hj) in g.iter().zip(h) {
+                if hj < cut {
+                    f(p, hj);
+                }
+            }
+        }
+    }
+    for p in rest {
+        let h = point_hash(p);
+        if h < cut {
+            f(p, h);
+        }
+    }
+}
+
 /// Whether `points` hold at least `want` distinct values, estimated by linear counting over a
 /// 65,536-bit map of their hashes (exact enough for the few thousand this is asked about).
 pub(super) fn distinct_at_least(points: &[[f64; 3]], want: usize) -> bool {
