@@ -4,7 +4,8 @@ selenium; WebGL through SwiftShader), against the simulated board.
 The tests run in file order on one capture: the page loads before any data; the capture
 starts and the sphere fills; the fit converges to the simulator's truth; the page's numbers
 equal /api/state; Save writes what `triaxcal fit` writes; nothing left 127.0.0.1 and the
-console stayed clean. Then a second capture has its cable pulled. The README's screenshot,
+console stayed clean (one of these run on its own, as with ``pytest -k``, loads the page and
+runs the capture first). Then a second capture has its cable pulled. The README's screenshot,
 ``docs/live.png``, is taken here and written only when ``TRIAXCAL_UPDATE_SCREENSHOT=1``
 (``make screenshot``), so that a test run leaves the checkout as it found it. Every wait is on
 a condition with a generous limit, so a loaded machine only makes the tests slower.
@@ -143,6 +144,21 @@ def run(tmp_path_factory):
         r.close()
 
 
+@pytest.fixture
+def finished(driver, run):
+    """The capture of ``run`` ended, with the page open: what the tests after the one that
+    watches the sphere fill see (when one of them runs on its own, it starts both here)."""
+    if not driver.current_url.startswith(run.server.url):
+        driver.get(run.server.url)
+    if run.thread.ident is None:
+        run.thread.start()
+    wait_for(lambda: driver.execute_script(
+        "return window.triaxcal && window.triaxcal.state && window.triaxcal.state.status")
+        == "finished", 600, "the end of the capture")
+    run.thread.join(60)
+    return run
+
+
 def page_numbers(d: Any) -> list[tuple[str, str, str]]:
     return d.execute_script(
         "return Array.from(document.querySelectorAll('[data-key]'))"
@@ -212,6 +228,7 @@ def test_coverage_rises_and_the_3d_view_renders(driver, run):
     assert during[-1][0] > during[0][0]
 
 
+@pytest.mark.usefixtures("finished")
 def test_fit_converges_to_the_simulators_truth(driver, run):
     assert run.error is None and run.result.stopped_by == "stop"
     doc = run.api()
@@ -233,6 +250,7 @@ def test_fit_converges_to_the_simulators_truth(driver, run):
     assert doc["stream"]["dropped"] == 0
 
 
+@pytest.mark.usefixtures("finished")
 def test_numbers_on_the_page_equal_api_state(driver, run):
     def differences() -> list[tuple[str, str, Any]]:
         doc = run.api()
@@ -269,6 +287,7 @@ def test_numbers_on_the_page_equal_api_state(driver, run):
     assert checked > 30
 
 
+@pytest.mark.usefixtures("finished")
 def test_screenshot_for_the_readme(driver, run, tmp_path):
     driver.execute_script("window.scrollTo(0, 0)")
     png = driver.get_screenshot_as_png()
@@ -280,6 +299,7 @@ def test_screenshot_for_the_readme(driver, run, tmp_path):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.usefixtures("finished")
 def test_save_writes_what_triaxcal_fit_writes(driver, run, tmp_path, capsys):
     driver.find_element("id", "btnSave").click()
     msg = wait_for(lambda: driver.execute_script(
@@ -299,6 +319,7 @@ def test_save_writes_what_triaxcal_fit_writes(driver, run, tmp_path, capsys):
         assert saved.part(sensor).to_dict() == cli.part(sensor).to_dict()
 
 
+@pytest.mark.usefixtures("finished")
 def test_no_console_error_and_no_request_left_127_0_0_1(driver, run):
     errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
     assert errors == [], errors
