@@ -6,7 +6,8 @@
 
 use crate::ellipsoid::{fit_ellipsoid, EllipsoidFit, FitOptions};
 use crate::error::{CalError, Result};
-use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::OnceLock;
 
 /// Fits every set in `sets`; the result has one entry per set, in order.
 ///
@@ -37,13 +38,36 @@ pub fn fit_batch(sets: &[&[[f64; 3]]], opts: &FitOptions) -> Vec<Result<Ellipsoi
         // fitting them on this thread
         return sets.iter().map(one).collect();
     }
-    sets.par_iter().map(one).collect()
+    // the calling thread fits sets from the start, and the pool's other threads join in as
+    // they wake, each taking the next set not yet taken
+    let next = AtomicUsize::new(0);
+    let out: Vec<OnceLock<Result<EllipsoidFit>>> = sets.iter().map(|_| OnceLock::new()).collect();
+    let work = || loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        let Some(s) = sets.get(i) else { break };
+        let _ = out[i].set(one(s));
+    };
+    rayon::in_place_scope(|scope| {
+        for _ in 1..rayon::current_num_threads().min(sets.len()) {
+            scope.spawn(|_| work());
+        }
+        work();
+    });
+    out.into_iter()
+        .map(|r| {
+            r.into_inner().unwrap_or_else(|| {
+                Err(CalError::InvalidArgument(
+                    "internal error: a set of the batch was not fitted (please report it)".into(),
+                ))
+            })
+        })
+        .collect()
 }
 
-/// Batches of at most this many points in all are fitted on the calling thread (a set of 200
-/// points takes about 6 us; waking the pool's threads and waiting for them, tens of us).
-/// Measured with 10 sets of 200 points, median of 41 calls 0.5 ms apart: 65 us on the calling
-/// thread, 155 us on the pool (its threads asleep since the last call); 20 sets, 120 us and
-/// 171 us. Only calls in a tight loop, while the threads still spin, gain from the pool at
-/// that size (10 sets, 50 us).
-pub const SEQUENTIAL_POINTS: usize = 4_000;
+/// Batches of at most this many points in all are fitted on the calling thread alone (a set
+/// of 200 points takes about 6 us; a thread of the pool asleep since the last call takes tens
+/// of us to wake, and the call waits for it even when the calling thread has fitted every
+/// set). Measured with sets of 200 points, median of 41 calls 0.5 ms apart (in a tight loop):
+/// 15 sets, 90 us on the calling thread alone, 90-103 us with the pool (54 us); 20 sets,
+/// 118 us and 92-99 us (78 us); 10 sets, 64 us and 76-81 us (54 us).
+pub const SEQUENTIAL_POINTS: usize = 3_000;
