@@ -6,8 +6,6 @@
 
 use crate::ellipsoid::{fit_ellipsoid, EllipsoidFit, FitOptions};
 use crate::error::{CalError, Result};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::OnceLock;
 
 /// Fits every set in `sets`; the result has one entry per set, in order.
 ///
@@ -38,30 +36,9 @@ pub fn fit_batch(sets: &[&[[f64; 3]]], opts: &FitOptions) -> Vec<Result<Ellipsoi
         // fitting them on this thread
         return sets.iter().map(one).collect();
     }
-    // the calling thread fits sets from the start, and the pool's other threads join in as
-    // they wake, each taking the next set not yet taken
-    let next = AtomicUsize::new(0);
-    let out: Vec<OnceLock<Result<EllipsoidFit>>> = sets.iter().map(|_| OnceLock::new()).collect();
-    let work = || loop {
-        let i = next.fetch_add(1, Ordering::Relaxed);
-        let Some(s) = sets.get(i) else { break };
-        let _ = out[i].set(one(s));
-    };
-    rayon::in_place_scope(|scope| {
-        for _ in 1..rayon::current_num_threads().min(sets.len()) {
-            scope.spawn(|_| work());
-        }
-        work();
-    });
-    out.into_iter()
-        .map(|r| {
-            r.into_inner().unwrap_or_else(|| {
-                Err(CalError::InvalidArgument(
-                    "internal error: a set of the batch was not fitted (please report it)".into(),
-                ))
-            })
-        })
-        .collect()
+    // the calling thread fits sets from the start, and the pool's threads join in as they
+    // wake, each taking the next set not yet taken
+    crate::pool::map_indexed(sets.len(), |i| one(&sets[i]))
 }
 
 /// Batches of at most this many points in all are fitted on the calling thread alone (a set

@@ -7,7 +7,6 @@
 use crate::error::{check_finite, CalError, Result};
 use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{Matrix3, Vector3};
-use rayon::prelude::*;
 
 /// Centroid, RMS distance from it and principal variances of a point cloud.
 #[derive(Debug, Clone, Copy)]
@@ -54,7 +53,7 @@ pub fn scan(points: &[[f64; 3]], parallel: bool) -> Result<Scan> {
     let p0 = points.first().copied().unwrap_or([0.0; 3]);
     let part = |c: &[[f64; 3]]| scan_part(c, p0);
     let (s1, s2, max_abs, probe) = if parallel && points.len() > 4 * SCAN_CHUNK {
-        let parts = points.par_chunks(SCAN_CHUNK).map(part).collect();
+        let parts = crate::pool::map_chunks(points, SCAN_CHUNK, part);
         crate::kernel::in_order(
             parts,
             || ([0.0; 3], [0.0; 6], 0.0, 0.0),
@@ -108,14 +107,12 @@ pub fn scan_picking<const K: usize, F: Fn(&[[f64; 3]], &mut [Vec<[f64; 3]>; K]) 
     };
     let mut lists: [Vec<[f64; 3]>; K] = std::array::from_fn(|_| Vec::new());
     let (s1, s2, max_abs, probe) = if parallel && points.len() > 4 * SCAN_CHUNK {
-        let parts: Vec<(Sums, [Vec<[f64; 3]>; K])> = points
-            .par_chunks(SCAN_CHUNK)
-            .map(|c| {
+        let parts: Vec<(Sums, [Vec<[f64; 3]>; K])> =
+            crate::pool::map_chunks(points, SCAN_CHUNK, |c| {
                 let mut l: [Vec<[f64; 3]>; K] = std::array::from_fn(|_| Vec::new());
                 sort(c, &mut l);
                 (scan_part(c, p0), l)
-            })
-            .collect();
+            });
         // the lists at their final size at once (growing them by doubling would hold up to
         // three times the points while copying)
         for (k, list) in lists.iter_mut().enumerate() {

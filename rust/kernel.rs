@@ -22,7 +22,6 @@
 //! ones (so that it never calls a software `fma`).
 
 use crate::simd::{arr3, dispatch, Simd};
-use rayon::prelude::*;
 
 /// Points per group (one AVX2 register of doubles per quantity).
 pub(crate) const LANES: usize = 4;
@@ -494,10 +493,7 @@ pub(crate) fn pass<const P: usize>(
     parallel: bool,
 ) -> Sums<P> {
     if parallel && points.len() > PARALLEL_ABOVE {
-        let parts = points
-            .par_chunks(CHUNK)
-            .map(|c| pass_serial::<P>(c, s, want))
-            .collect();
+        let parts = crate::pool::map_chunks(points, CHUNK, |c| pass_serial::<P>(c, s, want));
         in_order(parts, Sums::zero, Sums::add)
     } else {
         pass_serial::<P>(points, s, want)

@@ -24,6 +24,7 @@ pub mod geometry;
 mod kernel;
 mod linalg;
 pub mod logs;
+mod pool;
 mod simd;
 pub mod sphere;
 

@@ -12,7 +12,6 @@ use super::Norm;
 use crate::kernel::LANES;
 use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::SMatrix;
-use rayon::prelude::*;
 
 /// `Σ d dᵀ` over the design rows `d` of the normalised points (`M` = 10 or 7).
 pub(super) fn scatter<const M: usize>(
@@ -22,7 +21,7 @@ pub(super) fn scatter<const M: usize>(
 ) -> SMatrix<f64, M, M> {
     let part = |c: &[[f64; 3]]| dispatch!(|simd| moments::<_, M>(simd, c, norm));
     let sums = if parallel && points.len() > crate::kernel::PARALLEL_ABOVE {
-        let parts = points.par_chunks(crate::kernel::CHUNK).map(part).collect();
+        let parts = crate::pool::map_chunks(points, crate::kernel::CHUNK, part);
         crate::kernel::in_order(
             parts,
             || [0.0; MOMENTS],
