@@ -6,6 +6,7 @@
 
 use crate::ellipsoid::{fit_ellipsoid, EllipsoidFit, FitOptions};
 use crate::error::{CalError, Result};
+use rayon::prelude::*;
 
 /// Fits every set in `sets`; the result has one entry per set, in order.
 ///
@@ -36,10 +37,24 @@ pub fn fit_batch(sets: &[&[[f64; 3]]], opts: &FitOptions) -> Vec<Result<Ellipsoi
         // fitting them on this thread
         return sets.iter().map(one).collect();
     }
+    if sets.len() > POOL_SETS {
+        // a large batch: the wait for the pool is nothing beside it, and rayon's split into
+        // ranges measured faster here (10,000 sets of 200 points: 28.3-28.8 ms, against
+        // 29.5-32.0 ms shared as below)
+        return sets.par_iter().map(one).collect();
+    }
     // the calling thread fits sets from the start, and the pool's threads join in as they
-    // wake, each taking the next set not yet taken
-    crate::pool::map_indexed(sets.len(), |i| one(&sets[i]))
+    // wake, each taking the next run of sets not yet taken (runs of a few sets: taken a set
+    // at a time, 10,000 sets took 17 % longer)
+    let per = (sets.len() / (8 * rayon::current_num_threads())).clamp(1, 64);
+    crate::pool::map_chunks(sets, per, |c| c.iter().map(one).collect::<Vec<_>>())
+        .into_iter()
+        .flatten()
+        .collect()
 }
+
+/// Batches of more sets than this go to the pool whole (see [`fit_batch`]).
+const POOL_SETS: usize = 1_000;
 
 /// Batches of at most this many points in all are fitted on the calling thread alone (a set
 /// of 200 points takes about 6 us; a thread of the pool asleep since the last call takes tens
@@ -48,3 +63,59 @@ pub fn fit_batch(sets: &[&[[f64; 3]]], opts: &FitOptions) -> Vec<Result<Ellipsoi
 /// 15 sets, 90 us on the calling thread alone, 90-103 us with the pool (54 us); 20 sets,
 /// 118 us and 92-99 us (78 us); 10 sets, 64 us and 76-81 us (54 us).
 pub const SEQUENTIAL_POINTS: usize = 3_000;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `n` points on an ellipsoid with offset `(k, -k, 2k)`, a little noise (deterministic).
+    fn set(k: usize, n: usize) -> Vec<[f64; 3]> {
+        let mut x = 0x9e37_79b9_7f4a_7c15_u64 ^ k as u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        (0..n)
+            .map(|_| {
+                let (a, b, c) = (next(), next(), next());
+                let r = (a * a + b * b + c * c).sqrt().max(1e-9);
+                let k = k as f64;
+                [
+                    1.2 * a / r + k + 1e-3 * next(),
+                    0.9 * b / r - k + 1e-3 * next(),
+                    c / r + 2.0 * k + 1e-3 * next(),
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_path_returns_each_sets_own_fit_in_order() {
+        // the calling thread alone (300 points), shared with the pool (3,600), the pool alone
+        for count in [5, 60, POOL_SETS + 7] {
+            let mut sets: Vec<Vec<[f64; 3]>> = (0..count).map(|k| set(k, 60)).collect();
+            sets[3][0][1] = f64::NAN;
+            let refs: Vec<&[[f64; 3]]> = sets.iter().map(|s| &s[..]).collect();
+            let opts = FitOptions::default();
+            let out = fit_batch(&refs, &opts);
+            assert_eq!(out.len(), count);
+            let inner = FitOptions {
+                parallel: false,
+                diagnostics: false,
+                ..opts
+            };
+            for (k, got) in out.iter().enumerate() {
+                if k == 3 {
+                    assert!(got.is_err(), "{count}: set 3 has a NaN");
+                    continue;
+                }
+                let want = fit_ellipsoid(&sets[k], &inner).unwrap();
+                let got = got.as_ref().unwrap();
+                assert_eq!(got.offset, want.offset, "{count}: set {k}");
+                assert_eq!(got.matrix, want.matrix, "{count}: set {k}");
+            }
+        }
+    }
+}
