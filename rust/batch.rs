@@ -68,34 +68,18 @@ pub const SEQUENTIAL_POINTS: usize = 3_000;
 mod tests {
     use super::*;
 
-    /// `n` points on an ellipsoid with offset `(k, -k, 2k)`, a little noise (deterministic).
-    fn set(k: usize, n: usize) -> Vec<[f64; 3]> {
-        let mut x = 0x9e37_79b9_7f4a_7c15_u64 ^ k as u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        (0..n)
-            .map(|_| {
-                let (a, b, c) = (next(), next(), next());
-                let r = (a * a + b * b + c * c).sqrt().max(1e-9);
-                let k = k as f64;
-                [
-                    1.2 * a / r + k + 1e-3 * next(),
-                    0.9 * b / r - k + 1e-3 * next(),
-                    c / r + 2.0 * k + 1e-3 * next(),
-                ]
-            })
-            .collect()
+    /// 60 points on an ellipsoid with offset `(k, -k, 2k)`.
+    fn set(k: usize) -> Vec<[f64; 3]> {
+        let k = k as f64;
+        let w = nalgebra::Matrix3::new(1.2, 0.05, 0.0, 0.05, 0.9, -0.02, 0.0, -0.02, 1.0);
+        crate::ellipsoid::tests::ellipsoid_points([k, -k, 2.0 * k], w, 1.0, 60)
     }
 
     #[test]
     fn every_path_returns_each_sets_own_fit_in_order() {
         // the calling thread alone (300 points), shared with the pool (3,600), the pool alone
         for count in [5, 60, POOL_SETS + 7] {
-            let mut sets: Vec<Vec<[f64; 3]>> = (0..count).map(|k| set(k, 60)).collect();
+            let mut sets: Vec<Vec<[f64; 3]>> = (0..count).map(set).collect();
             sets[3][0][1] = f64::NAN;
             let refs: Vec<&[[f64; 3]]> = sets.iter().map(|s| &s[..]).collect();
             let opts = FitOptions::default();

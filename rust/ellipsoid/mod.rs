@@ -77,7 +77,7 @@ mod options;
 mod refine;
 mod subsample;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 use finish::finish;
 pub use options::{EllipsoidFit, FitOptions, Method, Model, FIXABLE};
