@@ -8,15 +8,22 @@ use crate::error::{check_finite, CalError, Result};
 use crate::simd::{arr3, dispatch, Simd};
 use nalgebra::{Matrix3, Vector3};
 
-/// Centroid, RMS distance from it and principal variances of a point cloud.
+/// Centroid, RMS distance from it and covariance of a point cloud.
 #[derive(Debug, Clone, Copy)]
 pub struct Spread {
     /// Mean of the points.
     pub mean: Vector3<f64>,
     /// RMS distance of the points from the mean (0 when all points coincide).
     pub scale: f64,
+    /// Covariance matrix of the points.
+    pub cov: Matrix3<f64>,
+}
+
+impl Spread {
     /// Variances along the principal axes, largest first.
-    pub variances: [f64; 3],
+    pub fn variances(&self) -> [f64; 3] {
+        sym3_eigenvalues(&self.cov).map(|v| v.max(0.0))
+    }
 }
 
 /// Relative variance below which a principal direction counts as empty (a spread of one
@@ -255,12 +262,7 @@ pub fn spread_of(s: &Scan) -> Spread {
     );
     let mean = Vector3::new(s.p0[0] + m[0], s.p0[1] + m[1], s.p0[2] + m[2]);
     let scale = cov.trace().max(0.0).sqrt();
-    let v = sym3_eigenvalues(&cov);
-    Spread {
-        mean,
-        scale,
-        variances: [v[0].max(0.0), v[1].max(0.0), v[2].max(0.0)],
-    }
+    Spread { mean, scale, cov }
 }
 
 /// Computes the [`Spread`] of `points` in one streaming pass (non-finite points give NaN).
@@ -362,7 +364,13 @@ pub fn check_three_dimensional(points: &[[f64; 3]], what: &str) -> Result<Spread
 /// [`check_three_dimensional`] from a [`Scan`] of `n` points.
 pub fn classify(s: &Scan, n: usize, what: &str) -> Result<Spread> {
     let sp = spread_of(s);
-    let [l1, l2, l3] = sp.variances;
+    // points spread in every direction (the usual case) need no eigenvalues: the lower bound
+    // on the smallest one is then far above FLAT_RATIO times the upper bound on the largest
+    let (lo, hi) = sym3_eigenvalue_bounds(&sp.cov);
+    if lo > 1e-6 * hi && hi < f64::INFINITY && sp.scale > 0.0 {
+        return Ok(sp);
+    }
+    let [l1, l2, l3] = sp.variances();
     if !(l1 > 0.0) || sp.scale == 0.0 {
         return Err(CalError::Degenerate {
             why: format!("all {n} points are identical, so the {what} is undetermined"),
@@ -461,6 +469,33 @@ mod tests {
     }
 
     #[test]
+    fn thin_slabs_are_judged_by_their_eigenvalues() {
+        // a slab of thickness t about a tilted plane: variance ratio about t²; the eigenvalue
+        // bound settles only clearly three-dimensional clouds, the rest go to the eigenvalues
+        let slab = |t: f64| -> Vec<[f64; 3]> {
+            (0..60)
+                .map(|i| {
+                    // in the plane spanned by (1, 0, 1) and (0, 1, 0), off it along (1, 0, -1)
+                    let a = (i as f64) * 0.7;
+                    let (x, y) = (a.cos(), (1.3 * a).sin());
+                    let e = if i % 2 == 0 { t } else { -t };
+                    [x + e, y, x - e]
+                })
+                .collect()
+        };
+        for (t, flat) in [(1e-9, true), (1e-5, false), (1e-2, false), (0.5, false)] {
+            let got = check_three_dimensional(&slab(t), "sphere");
+            let want = {
+                let s = scan(&slab(t), false).unwrap();
+                let v = spread_of(&s).variances();
+                v[2] / v[0] < FLAT_RATIO
+            };
+            assert_eq!(got.is_err(), flat, "thickness {t}");
+            assert_eq!(want, flat, "thickness {t}");
+        }
+    }
+
+    #[test]
     fn spread_of_cube_corners() {
         let mut pts = Vec::new();
         for i in 0..8 {
@@ -468,7 +503,7 @@ mod tests {
         }
         let s = spread(&pts);
         assert!((s.mean - Vector3::new(0.5, 0.5, 0.5)).norm() < 1e-12);
-        for v in s.variances {
+        for v in s.variances() {
             assert!((v - 0.25).abs() < 1e-12);
         }
     }

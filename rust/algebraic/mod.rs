@@ -128,6 +128,7 @@ fn smallest_eigenvector_of<const M: usize>(s: SMatrix<f64, M, M>) -> Option<SVec
         let i = e.eigenvalues.imin();
         return Some(SVector::<f64, M>::from_fn(|k, _| e.eigenvectors[(k, i)]));
     }
+    let mut last = f64::INFINITY;
     for _ in 0..50 {
         let mut x: [f64; M] = v.data.0[0];
         linalg::cholesky_solve_in_place(&chol, &mut x);
@@ -142,9 +143,12 @@ fn smallest_eigenvector_of<const M: usize>(s: SMatrix<f64, M, M>) -> Option<SVec
         }
         let change = (w - v).norm_squared();
         v = w;
-        if change < 1e-26 {
+        // converged; or converging so fast (the change shrinks by the same factor each step)
+        // that the next change would be below that: the step that only confirms it is left out
+        if change < 1e-26 || change * change < 1e-26 * last {
             break;
         }
+        last = change;
     }
     Some(v)
 }
