@@ -28,11 +28,15 @@
 //! and the upper half, which takes the window sums the lower half hands it a group of batches
 //! at a time. While the lower stage of every axis makes group `g + 1`, the upper stage of
 //! every axis reads group `g`: twice as many tasks as axes, of about equal work, so that three
-//! axes keep two cores busy (or one axis, two). The stages run in the same order with one
-//! thread or many, and each level's sums are made in a fixed order, so the result does not
-//! depend on the number of threads.
+//! axes keep two cores busy (or one axis, two). The calling thread and the pool's threads
+//! take the tasks of a push in order, a round (one group's tasks) at a time, in one job for
+//! the whole push (see `rounds_on_threads`). The stages run in the same order with one thread
+//! or many, and each level's sums are made in a fixed order, so the result does not depend on
+//! the number of threads.
 
 use super::{kahan_add, AllanResult, Cluster, BATCH, LANES};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 /// Window sums a level reads per call (its input and output buffers, 64 KiB each, stay in
 /// the core's second-level cache; 2,048 to 16,384 measured the same).
@@ -178,15 +182,19 @@ impl Cascade {
 
     /// Adds `rows` rows of `samples` (row-major, all finite: the caller checked), a group of
     /// batches at a time: the lower stage of group `g` and the upper stage of group `g - 1`
-    /// together, on several threads when there are many rows.
+    /// together (a round), on several threads when there are many rows.
     pub(super) fn push(&mut self, samples: &[f64], rows: usize, parallel: bool) {
         let nax = self.axes.len();
-        let parallel = parallel && rows >= PARALLEL_ROWS;
+        let parallel = parallel && rows >= PARALLEL_ROWS && rayon::current_num_threads() > 1;
         let (want, lower) = (&self.want[..], self.lower);
         let split = lower < want.len();
         let groups = rows.div_ceil(GROUP * BATCH);
-        for g in 0..groups + usize::from(split) {
-            let tasks = self.axes.iter_mut().enumerate().flat_map(|(a, ax)| {
+        let rounds = groups + usize::from(split);
+        // per axis: the lower stage's state, the upper stage's and the two handoff buffers
+        let parts: Vec<Parts> = self
+            .axes
+            .iter_mut()
+            .map(|ax| {
                 let Axis {
                     reference,
                     levels,
@@ -195,38 +203,78 @@ impl Cascade {
                     handoff: [h0, h1],
                 } = ax;
                 let (low, high) = levels.split_at_mut(lower);
-                let (made, read) = if g % 2 == 0 { (h0, h1) } else { (h1, h0) };
-                let first = if g < groups {
-                    let start = g * GROUP * BATCH;
-                    let end = (start + GROUP * BATCH).min(rows);
-                    Some(Task::Lower {
+                Parts {
+                    low: Mutex::new(Low {
+                        round: 0,
                         reference,
                         levels: low,
                         readings,
                         bufs: (b0, b1),
-                        handoff: split.then_some(made),
-                        rows: &samples[start * nax + a..],
-                        count: end - start,
-                        nax,
-                    })
-                } else {
-                    None
-                };
-                let second = (split && g > 0).then_some(Task::Upper {
-                    levels: high,
-                    bufs: (b2, b3),
-                    handoff: read,
+                    }),
+                    high: Mutex::new(High {
+                        round: 1,
+                        levels: high,
+                        bufs: (b2, b3),
+                    }),
+                    handoff: [Mutex::new(h0), Mutex::new(h1)],
+                }
+            })
+            .collect();
+        // task `i` of round `g`: the lower stage of axis `i` (i < nax), or the upper stage of
+        // axis `i - nax`; `None` where a round has no such task (no group left, or none yet)
+        let run = |g: usize, i: usize| {
+            if i < nax {
+                if g >= groups {
+                    return;
+                }
+                let start = g * GROUP * BATCH;
+                let end = (start + GROUP * BATCH).min(rows);
+                let p = &parts[i];
+                let mut low = p.low.lock().unwrap_or_else(|e| e.into_inner());
+                let mut made = p.handoff[g % 2].lock().unwrap_or_else(|e| e.into_inner());
+                let low = &mut *low;
+                // the rounds keep each stage's groups in order (a task out of order would
+                // corrupt the sums: stop rather than return them)
+                assert_eq!(low.round, g, "lower stage out of order");
+                low.round += 1;
+                Task::Lower {
+                    reference: &mut *low.reference,
+                    levels: &mut *low.levels,
+                    readings: &mut low.readings[..],
+                    bufs: (&mut *low.bufs.0, &mut *low.bufs.1),
+                    handoff: split.then_some(&mut **made),
+                    rows: &samples[start * nax + i..],
+                    count: end - start,
+                    nax,
+                }
+                .run(want);
+            } else if g > 0 {
+                let p = &parts[i - nax];
+                let mut high = p.high.lock().unwrap_or_else(|e| e.into_inner());
+                let mut read = p.handoff[(g + 1) % 2]
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner());
+                let high = &mut *high;
+                assert_eq!(high.round, g, "upper stage out of order");
+                high.round += 1;
+                Task::Upper {
+                    levels: &mut *high.levels,
+                    bufs: (&mut *high.bufs.0, &mut *high.bufs.1),
+                    handoff: &mut read,
                     k0: lower,
-                });
-                first.into_iter().chain(second)
-            });
-            if parallel {
-                use rayon::prelude::*;
-                let tasks: Vec<Task> = tasks.collect();
-                tasks.into_par_iter().for_each(|t| t.run(want));
-            } else {
-                tasks.for_each(|t| t.run(want));
+                }
+                .run(want);
             }
+        };
+        let per = if split { 2 * nax } else { nax };
+        if !parallel {
+            for g in 0..rounds {
+                for i in 0..per {
+                    run(g, i);
+                }
+            }
+        } else {
+            rounds_on_threads(rounds, per, &run);
         }
     }
 
@@ -255,6 +303,81 @@ impl Drop for Cascade {
             rings.chain(handoff).collect::<Vec<_>>()
         }));
     }
+}
+
+/// One axis's state, cut between the stages: each task locks the parts it works on (the
+/// locks are never contended: the rounds keep the tasks that share a part apart).
+struct Parts<'a> {
+    low: Mutex<Low<'a>>,
+    high: Mutex<High<'a>>,
+    /// Round `g`'s lower stage fills `handoff[g % 2]`, which round `g + 1`'s upper stage reads.
+    handoff: [Mutex<&'a mut (Vec<f64>, usize)>; 2],
+}
+
+/// The lower stage's state of one axis.
+struct Low<'a> {
+    /// The round of its next task.
+    round: usize,
+    reference: &'a mut f64,
+    levels: &'a mut [Level],
+    readings: &'a mut Vec<f64>,
+    bufs: (&'a mut Vec<f64>, &'a mut Vec<f64>),
+}
+
+/// The upper stage's state of one axis.
+struct High<'a> {
+    /// The round of its next task.
+    round: usize,
+    levels: &'a mut [Level],
+    bufs: (&'a mut Vec<f64>, &'a mut Vec<f64>),
+}
+
+/// Runs `run(g, i)` for every task `i < per` of every round `g < rounds` on the calling thread
+/// and the pool's threads: each takes the next task not yet taken, and a task of round `g`
+/// starts when every task of round `g - 1` has ended. One job for the whole push: with a rayon
+/// job per round (a round is about 0.5 ms of work for three axes), the calling thread waited
+/// parked for each, and after the process had been idle for 60 ms or more, one call in two
+/// ran on about one core (3 x 1e6 octave taus: 25-35 ms, with as much CPU time as wall time,
+/// against 13-17 ms right after another call).
+fn rounds_on_threads(rounds: usize, per: usize, run: &(dyn Fn(usize, usize) + Sync)) {
+    let total = rounds * per;
+    let next = AtomicUsize::new(0);
+    let done: Vec<AtomicUsize> = (0..rounds).map(|_| AtomicUsize::new(0)).collect();
+    // counted as ended even when it panics, so that no thread waits for it for ever (the
+    // panic then ends the scope)
+    struct Ended<'a>(&'a AtomicUsize);
+    impl Drop for Ended<'_> {
+        fn drop(&mut self) {
+            self.0.fetch_add(1, Ordering::Release);
+        }
+    }
+    let work = || loop {
+        let t = next.fetch_add(1, Ordering::Relaxed);
+        if t >= total {
+            break;
+        }
+        let (g, i) = (t / per, t % per);
+        if g > 0 {
+            // every task of the round before was taken before this one: wait for them to end
+            let mut spins = 0u32;
+            while done[g - 1].load(Ordering::Acquire) < per {
+                if spins < 100 {
+                    std::hint::spin_loop();
+                    spins += 1;
+                } else {
+                    std::thread::yield_now();
+                }
+            }
+        }
+        let _ended = Ended(&done[g]);
+        run(g, i);
+    };
+    rayon::in_place_scope(|scope| {
+        for _ in 1..rayon::current_num_threads().min(per) {
+            scope.spawn(|_| work());
+        }
+        work();
+    });
 }
 
 /// The work of one stage of one axis on one group of rows.

@@ -458,7 +458,21 @@ fn cascade_matches_the_general_path(top: u32) {
         two.push(&rows).unwrap();
         let bits =
             |r: AllanResult| -> Vec<u64> { r.adev.iter().flatten().map(|v| v.to_bits()).collect() };
-        assert_eq!(bits(one.result()), bits(two.result()));
+        let want = bits(one.result());
+        assert_eq!(bits(two.result()), want);
+        // and on pools of other sizes (more threads than the cores, too)
+        for threads in [1, 3, 5] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let got = pool.install(|| {
+                let mut acc = Allan::new(100.0, 3, &ms, None).unwrap();
+                acc.push(&rows).unwrap();
+                bits(acc.result())
+            });
+            assert_eq!(got, want, "{threads} threads");
+        }
     }
 }
 
