@@ -505,9 +505,13 @@ def notes(ins: dict[str, float]) -> list[str]:
                          "per sample and axis at 1e6; the longest cluster keeps a 2 MB ring per "
                          "axis, which streams from the last-level cache. Measured in-process "
                          "(Rust alone, no Python, the same 3 x 1e6 octave taus): 21-25 ms on one "
-                         "thread, 11.8-12.8 ms on two. 10x needs the two threads on two free "
-                         "cores; with this machine's other load (a load average about 1) they "
-                         "often share one, and the CPU-time ratio is then the floor.")
+                         "thread; on two, 10.4-12.4 ms right after another call and 15-20 ms "
+                         "after 150 ms asleep (the second core is slow to join). 10x needs the "
+                         "two threads on two free cores, and allantools' own time moves by a "
+                         "quarter from run to run (99-131 ms here), so the ratio lands either "
+                         "side of 10x; with this machine's other load (a load average about 1) "
+                         "the threads can share one core, and the CPU-time ratio is then the "
+                         "floor.")
                 if o and o[1] == o[1]:
                     text += (f" At this run's allantools time, 10x is {o[1] * o[3] / 10 * 1e3:.1f}"
                              " ms.")
