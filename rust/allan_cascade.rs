@@ -30,12 +30,11 @@
 //! every axis reads group `g`: twice as many tasks as axes, of about equal work, so that three
 //! axes keep two cores busy (or one axis, two). The calling thread and the pool's threads
 //! take the tasks of a push in order, a round (one group's tasks) at a time, in one job for
-//! the whole push (see `rounds_on_threads`). The stages run in the same order with one thread
+//! the whole push (see `pool::in_rounds`). The stages run in the same order with one thread
 //! or many, and each level's sums are made in a fixed order, so the result does not depend on
 //! the number of threads.
 
 use super::{kahan_add, AllanResult, Cluster, BATCH, LANES};
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 /// Window sums a level reads per call (its input and output buffers, 64 KiB each, stay in
@@ -185,7 +184,7 @@ impl Cascade {
     /// together (a round), on several threads when there are many rows.
     pub(super) fn push(&mut self, samples: &[f64], rows: usize, parallel: bool) {
         let nax = self.axes.len();
-        let parallel = parallel && rows >= PARALLEL_ROWS && rayon::current_num_threads() > 1;
+        let parallel = parallel && rows >= PARALLEL_ROWS;
         let (want, lower) = (&self.want[..], self.lower);
         let split = lower < want.len();
         let groups = rows.div_ceil(GROUP * BATCH);
@@ -221,7 +220,7 @@ impl Cascade {
             })
             .collect();
         // task `i` of round `g`: the lower stage of axis `i` (i < nax), or the upper stage of
-        // axis `i - nax`; `None` where a round has no such task (no group left, or none yet)
+        // axis `i - nax`; nothing where a round has no such task (no group left, or none yet)
         let run = |g: usize, i: usize| {
             if i < nax {
                 if g >= groups {
@@ -274,7 +273,7 @@ impl Cascade {
                 }
             }
         } else {
-            rounds_on_threads(rounds, per, &run);
+            crate::pool::in_rounds(rounds, per, &run);
         }
     }
 
@@ -330,54 +329,6 @@ struct High<'a> {
     round: usize,
     levels: &'a mut [Level],
     bufs: (&'a mut Vec<f64>, &'a mut Vec<f64>),
-}
-
-/// Runs `run(g, i)` for every task `i < per` of every round `g < rounds` on the calling thread
-/// and the pool's threads: each takes the next task not yet taken, and a task of round `g`
-/// starts when every task of round `g - 1` has ended. One job for the whole push: with a rayon
-/// job per round (a round is about 0.5 ms of work for three axes), the calling thread waited
-/// parked for each, and after the process had been idle for 60 ms or more, one call in two
-/// ran on about one core (3 x 1e6 octave taus: 25-35 ms, with as much CPU time as wall time,
-/// against 13-17 ms right after another call).
-fn rounds_on_threads(rounds: usize, per: usize, run: &(dyn Fn(usize, usize) + Sync)) {
-    let total = rounds * per;
-    let next = AtomicUsize::new(0);
-    let done: Vec<AtomicUsize> = (0..rounds).map(|_| AtomicUsize::new(0)).collect();
-    // counted as ended even when it panics, so that no thread waits for it for ever (the
-    // panic then ends the scope)
-    struct Ended<'a>(&'a AtomicUsize);
-    impl Drop for Ended<'_> {
-        fn drop(&mut self) {
-            self.0.fetch_add(1, Ordering::Release);
-        }
-    }
-    let work = || loop {
-        let t = next.fetch_add(1, Ordering::Relaxed);
-        if t >= total {
-            break;
-        }
-        let (g, i) = (t / per, t % per);
-        if g > 0 {
-            // every task of the round before was taken before this one: wait for them to end
-            let mut spins = 0u32;
-            while done[g - 1].load(Ordering::Acquire) < per {
-                if spins < 100 {
-                    std::hint::spin_loop();
-                    spins += 1;
-                } else {
-                    std::thread::yield_now();
-                }
-            }
-        }
-        let _ended = Ended(&done[g]);
-        run(g, i);
-    };
-    rayon::in_place_scope(|scope| {
-        for _ in 1..rayon::current_num_threads().min(per) {
-            scope.spawn(|_| work());
-        }
-        work();
-    });
 }
 
 /// The work of one stage of one axis on one group of rows.

@@ -366,8 +366,9 @@ pub fn classify(s: &Scan, n: usize, what: &str) -> Result<Spread> {
     let sp = spread_of(s);
     // points spread in every direction (the usual case) need no eigenvalues: the lower bound
     // on the smallest one is then far above FLAT_RATIO times the upper bound on the largest
+    // (a million times: far beyond the eigenvalues' round-off)
     let (lo, hi) = sym3_eigenvalue_bounds(&sp.cov);
-    if lo > 1e-6 * hi && hi < f64::INFINITY && sp.scale > 0.0 {
+    if lo > 1e6 * FLAT_RATIO * hi && hi < f64::INFINITY && sp.scale > 0.0 {
         return Ok(sp);
     }
     let [l1, l2, l3] = sp.variances();
