@@ -26,13 +26,14 @@
 //!
 //! Threads: the levels of each axis are cut in two stages, the lower half (with the readings)
 //! and the upper half, which takes the window sums the lower half hands it a group of batches
-//! at a time. While the lower stage of every axis makes group `g + 1`, the upper stage of
-//! every axis reads group `g`: twice as many tasks as axes, of about equal work, so that three
-//! axes keep two cores busy (or one axis, two). The calling thread and the pool's threads
-//! take the tasks of a push in order, a round (one group's tasks) at a time, in one job for
-//! the whole push (see `pool::in_rounds`). The stages run in the same order with one thread
-//! or many, and each level's sums are made in a fixed order, so the result does not depend on
-//! the number of threads.
+//! at a time. While the lower stage of an axis makes group `g + 1`, its upper stage reads
+//! group `g`: twice as many chains of tasks as axes, of about equal work, so that three axes
+//! keep two cores busy (or one axis, two). The calling thread and the pool's threads take the
+//! tasks of a push as they become ready, in one job for the whole push (see
+//! `pool::in_chains`): an upper task once the lower task it reads has ended, a lower task
+//! once the handoff buffer it fills has been read. Each stage runs its groups in order with
+//! one thread or many, and each level's sums are made in a fixed order, so the result does
+//! not depend on the number of threads.
 
 use super::{kahan_add, AllanResult, Cluster, BATCH, LANES};
 use std::sync::Mutex;
@@ -180,15 +181,14 @@ impl Cascade {
     }
 
     /// Adds `rows` rows of `samples` (row-major, all finite: the caller checked), a group of
-    /// batches at a time: the lower stage of group `g` and the upper stage of group `g - 1`
-    /// together (a round), on several threads when there are many rows.
+    /// batches at a time through each axis's stages, on several threads when there are many
+    /// rows.
     pub(super) fn push(&mut self, samples: &[f64], rows: usize, parallel: bool) {
         let nax = self.axes.len();
         let parallel = parallel && rows >= PARALLEL_ROWS;
         let (want, lower) = (&self.want[..], self.lower);
         let split = lower < want.len();
         let groups = rows.div_ceil(GROUP * BATCH);
-        let rounds = groups + usize::from(split);
         // per axis: the lower stage's state, the upper stage's and the two handoff buffers
         let parts: Vec<Parts> = self
             .axes
@@ -204,14 +204,14 @@ impl Cascade {
                 let (low, high) = levels.split_at_mut(lower);
                 Parts {
                     low: Mutex::new(Low {
-                        round: 0,
+                        next: 0,
                         reference,
                         levels: low,
                         readings,
                         bufs: (b0, b1),
                     }),
                     high: Mutex::new(High {
-                        round: 1,
+                        next: 0,
                         levels: high,
                         bufs: (b2, b3),
                     }),
@@ -219,43 +219,39 @@ impl Cascade {
                 }
             })
             .collect();
-        // task `i` of round `g`: the lower stage of axis `i` (i < nax), or the upper stage of
-        // axis `i - nax`; nothing where a round has no such task (no group left, or none yet)
-        let run = |g: usize, i: usize| {
-            if i < nax {
-                if g >= groups {
-                    return;
-                }
-                let start = g * GROUP * BATCH;
+        // chain `c < nax`: the lower stage of axis `c`, one task per group; chain `nax + a`:
+        // the upper stage of axis `a`, whose task `g` reads what the lower stage's task `g`
+        // made
+        let run = |c: usize, g: usize| {
+            let start = g * GROUP * BATCH;
+            if c < nax {
                 let end = (start + GROUP * BATCH).min(rows);
-                let p = &parts[i];
+                let p = &parts[c];
                 let mut low = p.low.lock().unwrap_or_else(|e| e.into_inner());
                 let mut made = p.handoff[g % 2].lock().unwrap_or_else(|e| e.into_inner());
                 let low = &mut *low;
-                // the rounds keep each stage's groups in order (a task out of order would
+                // the chains keep each stage's groups in order (a task out of order would
                 // corrupt the sums: stop rather than return them)
-                assert_eq!(low.round, g, "lower stage out of order");
-                low.round += 1;
+                assert_eq!(low.next, g, "lower stage out of order");
+                low.next += 1;
                 Task::Lower {
                     reference: &mut *low.reference,
                     levels: &mut *low.levels,
                     readings: &mut low.readings[..],
                     bufs: (&mut *low.bufs.0, &mut *low.bufs.1),
                     handoff: split.then_some(&mut **made),
-                    rows: &samples[start * nax + i..],
+                    rows: &samples[start * nax + c..],
                     count: end - start,
                     nax,
                 }
                 .run(want);
-            } else if g > 0 {
-                let p = &parts[i - nax];
+            } else {
+                let p = &parts[c - nax];
                 let mut high = p.high.lock().unwrap_or_else(|e| e.into_inner());
-                let mut read = p.handoff[(g + 1) % 2]
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner());
+                let mut read = p.handoff[g % 2].lock().unwrap_or_else(|e| e.into_inner());
                 let high = &mut *high;
-                assert_eq!(high.round, g, "upper stage out of order");
-                high.round += 1;
+                assert_eq!(high.next, g, "upper stage out of order");
+                high.next += 1;
                 Task::Upper {
                     levels: &mut *high.levels,
                     bufs: (&mut *high.bufs.0, &mut *high.bufs.1),
@@ -265,15 +261,32 @@ impl Cascade {
                 .run(want);
             }
         };
-        let per = if split { 2 * nax } else { nax };
+        let chains = if split { 2 * nax } else { nax };
         if !parallel {
-            for g in 0..rounds {
-                for i in 0..per {
-                    run(g, i);
+            // the order of the ranks below
+            for g in 0..groups {
+                for c in 0..nax {
+                    run(c, g);
+                }
+                if split {
+                    for c in nax..chains {
+                        run(c, g);
+                    }
                 }
             }
         } else {
-            crate::pool::in_rounds(rounds, per, &run);
+            // a lower task may start once the upper task two groups back has read the
+            // handoff buffer it fills; an upper task once the lower task it reads has ended
+            let ready = |c: usize, g: usize, ended: &[usize]| {
+                if c < nax {
+                    !split || ended[nax + c] + 1 >= g
+                } else {
+                    ended[c - nax] > g
+                }
+            };
+            let rank = |c: usize, g: usize| if c < nax { 2 * g + 1 } else { 2 * g + 2 };
+            let lens = vec![groups; chains];
+            crate::pool::in_chains(&lens, &ready, &rank, &run);
         }
     }
 
@@ -305,18 +318,18 @@ impl Drop for Cascade {
 }
 
 /// One axis's state, cut between the stages: each task locks the parts it works on (the
-/// locks are never contended: the rounds keep the tasks that share a part apart).
+/// locks are never contended: the chains keep the tasks that share a part apart).
 struct Parts<'a> {
     low: Mutex<Low<'a>>,
     high: Mutex<High<'a>>,
-    /// Round `g`'s lower stage fills `handoff[g % 2]`, which round `g + 1`'s upper stage reads.
+    /// The lower stage's task `g` fills `handoff[g % 2]`, which the upper stage's task `g` reads.
     handoff: [Mutex<&'a mut (Vec<f64>, usize)>; 2],
 }
 
 /// The lower stage's state of one axis.
 struct Low<'a> {
-    /// The round of its next task.
-    round: usize,
+    /// The group of its next task.
+    next: usize,
     reference: &'a mut f64,
     levels: &'a mut [Level],
     readings: &'a mut Vec<f64>,
@@ -325,8 +338,8 @@ struct Low<'a> {
 
 /// The upper stage's state of one axis.
 struct High<'a> {
-    /// The round of its next task.
-    round: usize,
+    /// The group of its next task.
+    next: usize,
     levels: &'a mut [Level],
     bufs: (&'a mut Vec<f64>, &'a mut Vec<f64>),
 }

@@ -6,66 +6,122 @@
 //! several passes over its points, each such a call. [`map_indexed`] has the caller compute
 //! from the start instead, while the pool's threads join in as they wake; each takes the next
 //! index not yet taken. The values come back in index order, so what a caller makes of them
-//! does not depend on which thread computed which. [`in_rounds`] does the same for work in
-//! rounds, each round's tasks after the round before, in one job for all of them.
+//! does not depend on which thread computed which. [`in_chains`] does the same for chains of
+//! tasks that wait for each other, in one job for all of them.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::OnceLock;
+use std::sync::{Mutex, MutexGuard, OnceLock};
 
 /// `[f(0), f(1), ..., f(n - 1)]`, computed by the calling thread and the pool's threads.
 pub(crate) fn map_indexed<T: Send + Sync>(n: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
     let slots: Vec<OnceLock<T>> = (0..n).map(|_| OnceLock::new()).collect();
-    in_rounds(1, n, &|_, i| {
+    let next = AtomicUsize::new(0);
+    let work = || loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        if i >= n {
+            break;
+        }
         let _ = slots[i].set(f(i));
+    };
+    rayon::in_place_scope(|scope| {
+        for _ in 1..rayon::current_num_threads().min(n) {
+            scope.spawn(|_| work());
+        }
+        work();
     });
-    // every index below n was taken once, and its value set before the rounds ended (a panic
-    // in `f` would have ended them by a panic)
+    // every index below n was taken once, and its value set before the scope ended (a panic
+    // in `f` would have ended it by a panic)
     slots.into_iter().filter_map(OnceLock::into_inner).collect()
 }
 
-/// Runs `run(g, i)` for every task `i < per` of every round `g < rounds`, on the calling
-/// thread and the pool's threads: each takes the next task not yet taken, and a task of round
-/// `g` starts when every task of round `g - 1` has ended (a thread that takes one early
-/// waits, spinning, for them). One job for all the rounds: a rayon job per round parks the
-/// caller for each, and the Allan cascade's push, a round per 0.5 ms of work, ran on about
-/// one core in one call of two after the process had been idle for 60 ms or more (3 x 1e6
-/// octave taus: 25-35 ms, with as much CPU time as wall time, against 13-17 ms right after
-/// another call).
-pub(crate) fn in_rounds(rounds: usize, per: usize, run: &(dyn Fn(usize, usize) + Sync)) {
-    let total = rounds * per;
-    let next = AtomicUsize::new(0);
-    let done: Vec<AtomicUsize> = (0..rounds).map(|_| AtomicUsize::new(0)).collect();
-    // counted as ended even when it panics, so that no thread waits for it for ever (the
-    // panic then ends the scope)
-    struct Ended<'a>(&'a AtomicUsize);
-    impl Drop for Ended<'_> {
+/// Runs the tasks of several chains on the calling thread and the pool's threads, in one job:
+/// chain `c`'s tasks `0..lens[c]` in order, never two of a chain at once, and task `j` of
+/// chain `c` only once `ready(c, j, ended)` holds, `ended(c')` being how many tasks of chain
+/// `c'` have ended. A thread takes, of the chains whose next task may start and is not
+/// running, the one whose task has the lowest `rank(c, j)` (the lower chain on a tie), and
+/// waits, spinning and then yielding, while there is none. One job for all the tasks: a
+/// rayon job per step parks the caller for each, and the Allan cascade's push, a step per
+/// 0.5 ms of work, then ran on about one core in one call of two after the process had been
+/// idle for 60 ms or more. And no barrier between steps: with the Allan cascade's tasks in
+/// rounds, each round's after every task of the round before, a thread waited for tasks it
+/// did not need (3 x 1e6 octave taus, two threads, medians of 25 calls in six interleaved runs: 11.1-12.1
+/// ms in rounds, 9.9-11.1 ms in chains).
+///
+/// Panics if no task can start while none is running and tasks remain (rules that can
+/// never be met).
+pub(crate) fn in_chains(
+    lens: &[usize],
+    ready: &(dyn Fn(usize, usize, &[usize]) -> bool + Sync),
+    rank: &(dyn Fn(usize, usize) -> usize + Sync),
+    run: &(dyn Fn(usize, usize) + Sync),
+) {
+    // per chain: whether a task of it is running, and how many of its tasks have ended
+    struct State {
+        running: Vec<bool>,
+        ended: Vec<usize>,
+        left: usize,
+    }
+    let state = Mutex::new(State {
+        running: vec![false; lens.len()],
+        ended: vec![0; lens.len()],
+        left: lens.iter().sum(),
+    });
+    let lock = || state.lock().unwrap_or_else(|e| e.into_inner());
+    // marks the task ended even when it panics, so that no thread waits for it for ever
+    // (the panic then ends the scope)
+    struct Ended<'a, F: Fn() -> MutexGuard<'a, State>>(&'a F, usize);
+    impl<'a, F: Fn() -> MutexGuard<'a, State>> Drop for Ended<'a, F> {
         fn drop(&mut self) {
-            self.0.fetch_add(1, Ordering::Release);
+            let mut s = (self.0)();
+            s.running[self.1] = false;
+            s.ended[self.1] += 1;
+            s.left -= 1;
         }
     }
-    let work = || loop {
-        let t = next.fetch_add(1, Ordering::Relaxed);
-        if t >= total {
-            break;
-        }
-        let (g, i) = (t / per, t % per);
-        if g > 0 {
-            // every task of the round before was taken before this one: wait for them to end
-            let mut spins = 0u32;
-            while done[g - 1].load(Ordering::Acquire) < per {
-                if spins < 100 {
+    let work = || {
+        let mut spins = 0u32;
+        loop {
+            let task = {
+                let mut s = lock();
+                if s.left == 0 {
+                    break;
+                }
+                let mut best: Option<(usize, usize, usize)> = None;
+                for (c, &len) in lens.iter().enumerate() {
+                    let j = s.ended[c];
+                    if s.running[c] || j >= len || !ready(c, j, &s.ended) {
+                        continue;
+                    }
+                    let r = rank(c, j);
+                    if best.is_none_or(|(b, _, _)| r < b) {
+                        best = Some((r, c, j));
+                    }
+                }
+                assert!(
+                    best.is_some() || s.running.iter().any(|&r| r),
+                    "no task of the chains can start"
+                );
+                if let Some((_, c, _)) = best {
+                    s.running[c] = true;
+                }
+                best
+            };
+            match task {
+                Some((_, c, j)) => {
+                    spins = 0;
+                    let _ended = Ended(&lock, c);
+                    run(c, j);
+                }
+                None if spins < 100 => {
                     std::hint::spin_loop();
                     spins += 1;
-                } else {
-                    std::thread::yield_now();
                 }
+                None => std::thread::yield_now(),
             }
         }
-        let _ended = Ended(&done[g]);
-        run(g, i);
     };
     rayon::in_place_scope(|scope| {
-        for _ in 1..rayon::current_num_threads().min(per) {
+        for _ in 1..rayon::current_num_threads().min(lens.len()) {
             scope.spawn(|_| work());
         }
         work();
@@ -100,30 +156,92 @@ mod tests {
         assert_eq!(map_indexed(1, |i| i + 5), vec![5]);
     }
 
+    /// Two chains of a pipeline like the Allan cascade's: chain 1's task `j` reads what
+    /// chain 0's task `j` made, and chain 0's task `j` reuses the buffer chain 1's task
+    /// `j - 2` read; plus a free chain.
+    fn pipeline_rules(c: usize, j: usize, ended: &[usize]) -> bool {
+        match c {
+            0 => ended[1] + 1 >= j,
+            1 => ended[0] > j,
+            _ => true,
+        }
+    }
+
     #[test]
-    fn a_round_starts_when_the_round_before_has_ended() {
-        let (rounds, per) = (30, 4);
+    fn a_task_starts_only_when_its_rules_allow_and_chains_keep_their_order() {
+        let n = 20;
         for threads in [1, 2, 3, 5] {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            let ended: Vec<AtomicUsize> = (0..rounds).map(|_| AtomicUsize::new(0)).collect();
-            let early = AtomicUsize::new(0);
+            let ended: Vec<AtomicUsize> = (0..3).map(|_| AtomicUsize::new(0)).collect();
+            let running: Vec<AtomicUsize> = (0..3).map(|_| AtomicUsize::new(0)).collect();
+            let broken = AtomicUsize::new(0);
             pool.install(|| {
-                in_rounds(rounds, per, &|g, i| {
-                    if g > 0 && ended[g - 1].load(Ordering::SeqCst) != per {
-                        early.fetch_add(1, Ordering::SeqCst);
-                    }
-                    if i == 0 {
-                        // the first task of a round is the slowest: the others end first
-                        std::thread::sleep(std::time::Duration::from_micros(300));
-                    }
-                    ended[g].fetch_add(1, Ordering::SeqCst);
-                })
+                in_chains(
+                    &[n, n, n],
+                    &pipeline_rules,
+                    &|c, j| 2 * j + usize::from(c == 1),
+                    &|c, j| {
+                        let now: Vec<usize> =
+                            ended.iter().map(|e| e.load(Ordering::SeqCst)).collect();
+                        // in order, alone in its chain, and only when the rules allow
+                        let alone = running[c].fetch_add(1, Ordering::SeqCst) == 0;
+                        if now[c] != j || !alone || !pipeline_rules(c, j, &now) {
+                            broken.fetch_add(1, Ordering::SeqCst);
+                        }
+                        if j % 3 == c {
+                            // some tasks slower than the others
+                            std::thread::sleep(std::time::Duration::from_micros(300));
+                        }
+                        running[c].fetch_sub(1, Ordering::SeqCst);
+                        ended[c].fetch_add(1, Ordering::SeqCst);
+                    },
+                )
             });
-            assert_eq!(early.into_inner(), 0, "{threads} threads");
-            assert!(ended.iter().all(|e| e.load(Ordering::SeqCst) == per));
+            assert_eq!(broken.into_inner(), 0, "{threads} threads");
+            assert!(ended.iter().all(|e| e.load(Ordering::SeqCst) == n));
         }
+    }
+
+    #[test]
+    fn one_thread_runs_the_tasks_in_the_order_of_their_ranks() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let order = Mutex::new(Vec::new());
+        pool.install(|| {
+            in_chains(
+                &[3, 3],
+                &pipeline_rules,
+                &|c, j| 2 * j + usize::from(c == 1),
+                &|c, j| order.lock().unwrap().push((c, j)),
+            )
+        });
+        let want = vec![(0, 0), (1, 0), (0, 1), (1, 1), (0, 2), (1, 2)];
+        assert_eq!(order.into_inner().unwrap(), want);
+    }
+
+    #[test]
+    fn rules_that_can_never_be_met_panic_instead_of_hanging() {
+        let never = std::panic::catch_unwind(|| {
+            in_chains(&[2, 2], &|c, _, _| c == 0, &|_, j| j, &|_, _| {});
+        });
+        assert!(never.is_err());
+        // a task that panics ends the call by its panic, with no thread left waiting for it
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            pool.install(|| {
+                in_chains(&[5, 5], &pipeline_rules, &|_, j| j, &|c, j| {
+                    assert!(!(c == 0 && j == 2), "a failing task");
+                })
+            })
+        }));
+        assert!(panicked.is_err());
     }
 }
