@@ -36,6 +36,7 @@
 //! not depend on the number of threads.
 
 use super::{kahan_add, AllanResult, Cluster, BATCH, LANES};
+use crate::pool::lock;
 use std::sync::Mutex;
 
 /// Window sums a level reads per call (its input and output buffers, 64 KiB each, stay in
@@ -227,8 +228,8 @@ impl Cascade {
             if c < nax {
                 let end = (start + GROUP * BATCH).min(rows);
                 let p = &parts[c];
-                let mut low = p.low.lock().unwrap_or_else(|e| e.into_inner());
-                let mut made = p.handoff[g % 2].lock().unwrap_or_else(|e| e.into_inner());
+                let mut low = lock(&p.low);
+                let mut made = lock(&p.handoff[g % 2]);
                 let low = &mut *low;
                 // the chains keep each stage's groups in order (a task out of order would
                 // corrupt the sums: stop rather than return them)
@@ -247,8 +248,8 @@ impl Cascade {
                 .run(want);
             } else {
                 let p = &parts[c - nax];
-                let mut high = p.high.lock().unwrap_or_else(|e| e.into_inner());
-                let mut read = p.handoff[g % 2].lock().unwrap_or_else(|e| e.into_inner());
+                let mut high = lock(&p.high);
+                let mut read = lock(&p.handoff[g % 2]);
                 let high = &mut *high;
                 assert_eq!(high.next, g, "upper stage out of order");
                 high.next += 1;
@@ -261,33 +262,18 @@ impl Cascade {
                 .run(want);
             }
         };
-        let chains = if split { 2 * nax } else { nax };
-        if !parallel {
-            // the order of the ranks below
-            for g in 0..groups {
-                for c in 0..nax {
-                    run(c, g);
-                }
-                if split {
-                    for c in nax..chains {
-                        run(c, g);
-                    }
-                }
+        // a lower task may start once the upper task two groups back has read the handoff
+        // buffer it fills; an upper task once the lower task it reads has ended
+        let ready = |c: usize, g: usize, ended: &[usize]| {
+            if c < nax {
+                !split || ended[nax + c] + 1 >= g
+            } else {
+                ended[c - nax] > g
             }
-        } else {
-            // a lower task may start once the upper task two groups back has read the
-            // handoff buffer it fills; an upper task once the lower task it reads has ended
-            let ready = |c: usize, g: usize, ended: &[usize]| {
-                if c < nax {
-                    !split || ended[nax + c] + 1 >= g
-                } else {
-                    ended[c - nax] > g
-                }
-            };
-            let rank = |c: usize, g: usize| if c < nax { 2 * g + 1 } else { 2 * g + 2 };
-            let lens = vec![groups; chains];
-            crate::pool::in_chains(&lens, &ready, &rank, &run);
-        }
+        };
+        let rank = |c: usize, g: usize| if c < nax { 2 * g + 1 } else { 2 * g + 2 };
+        let lens = vec![groups; if split { 2 * nax } else { nax }];
+        crate::pool::in_chains(parallel, &lens, &ready, &rank, &run);
     }
 
     /// The deviation after `n` samples per axis, for `clusters` (those given to [`Cascade::new`]).

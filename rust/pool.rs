@@ -44,12 +44,14 @@ pub(crate) fn map_indexed<T: Send + Sync>(n: usize, f: impl Fn(usize) -> T + Syn
 /// 0.5 ms of work, then ran on about one core in one call of two after the process had been
 /// idle for 60 ms or more. And no barrier between steps: with the Allan cascade's tasks in
 /// rounds, each round's after every task of the round before, a thread waited for tasks it
-/// did not need (3 x 1e6 octave taus, two threads, medians of 25 calls in six interleaved runs: 11.1-12.1
-/// ms in rounds, 9.9-11.1 ms in chains).
+/// did not need (3 x 1e6 octave taus, two threads, medians of 25 calls in six interleaved
+/// runs: 11.1-12.1 ms in rounds, 9.9-11.1 ms in chains). Unless `parallel`, the calling
+/// thread runs every task itself, in the same order of ranks.
 ///
 /// Panics if no task can start while none is running and tasks remain (rules that can
 /// never be met).
 pub(crate) fn in_chains(
+    parallel: bool,
     lens: &[usize],
     ready: &(dyn Fn(usize, usize, &[usize]) -> bool + Sync),
     rank: &(dyn Fn(usize, usize) -> usize + Sync),
@@ -66,13 +68,12 @@ pub(crate) fn in_chains(
         ended: vec![0; lens.len()],
         left: lens.iter().sum(),
     });
-    let lock = || state.lock().unwrap_or_else(|e| e.into_inner());
     // marks the task ended even when it panics, so that no thread waits for it for ever
     // (the panic then ends the scope)
-    struct Ended<'a, F: Fn() -> MutexGuard<'a, State>>(&'a F, usize);
-    impl<'a, F: Fn() -> MutexGuard<'a, State>> Drop for Ended<'a, F> {
+    struct Ended<'a>(&'a Mutex<State>, usize);
+    impl Drop for Ended<'_> {
         fn drop(&mut self) {
-            let mut s = (self.0)();
+            let mut s = lock(self.0);
             s.running[self.1] = false;
             s.ended[self.1] += 1;
             s.left -= 1;
@@ -82,7 +83,7 @@ pub(crate) fn in_chains(
         let mut spins = 0u32;
         loop {
             let task = {
-                let mut s = lock();
+                let mut s = lock(&state);
                 if s.left == 0 {
                     break;
                 }
@@ -109,7 +110,7 @@ pub(crate) fn in_chains(
             match task {
                 Some((_, c, j)) => {
                     spins = 0;
-                    let _ended = Ended(&lock, c);
+                    let _ended = Ended(&state, c);
                     run(c, j);
                 }
                 None if spins < 100 => {
@@ -120,12 +121,21 @@ pub(crate) fn in_chains(
             }
         }
     };
+    if !parallel {
+        return work();
+    }
     rayon::in_place_scope(|scope| {
         for _ in 1..rayon::current_num_threads().min(lens.len()) {
             scope.spawn(|_| work());
         }
         work();
     });
+}
+
+/// Locks `m`, going on after a panic of the thread that held it (which is then on its way
+/// to the caller).
+pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// `f` of each chunk of `chunk` items of `items` (the last may be shorter), in order; see
@@ -180,6 +190,7 @@ mod tests {
             let broken = AtomicUsize::new(0);
             pool.install(|| {
                 in_chains(
+                    true,
                     &[n, n, n],
                     &pipeline_rules,
                     &|c, j| 2 * j + usize::from(c == 1),
@@ -207,27 +218,43 @@ mod tests {
 
     #[test]
     fn one_thread_runs_the_tasks_in_the_order_of_their_ranks() {
+        let want = vec![(0, 0), (1, 0), (0, 1), (1, 1), (0, 2), (1, 2)];
+        let run = |parallel: bool| {
+            let order = Mutex::new(Vec::new());
+            let caller = std::thread::current().id();
+            let elsewhere = AtomicUsize::new(0);
+            in_chains(
+                parallel,
+                &[3, 3],
+                &pipeline_rules,
+                &|c, j| 2 * j + usize::from(c == 1),
+                &|c, j| {
+                    if std::thread::current().id() != caller {
+                        elsewhere.fetch_add(1, Ordering::SeqCst);
+                    }
+                    order.lock().unwrap().push((c, j));
+                },
+            );
+            (order.into_inner().unwrap(), elsewhere.into_inner())
+        };
+        // a pool of one thread
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
             .build()
             .unwrap();
-        let order = Mutex::new(Vec::new());
-        pool.install(|| {
-            in_chains(
-                &[3, 3],
-                &pipeline_rules,
-                &|c, j| 2 * j + usize::from(c == 1),
-                &|c, j| order.lock().unwrap().push((c, j)),
-            )
-        });
-        let want = vec![(0, 0), (1, 0), (0, 1), (1, 1), (0, 2), (1, 2)];
-        assert_eq!(order.into_inner().unwrap(), want);
+        assert_eq!(pool.install(|| run(true)).0, want);
+        // not parallel, in a pool of several: the calling thread alone
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        assert_eq!(pool.install(|| run(false)), (want, 0));
     }
 
     #[test]
     fn rules_that_can_never_be_met_panic_instead_of_hanging() {
         let never = std::panic::catch_unwind(|| {
-            in_chains(&[2, 2], &|c, _, _| c == 0, &|_, j| j, &|_, _| {});
+            in_chains(true, &[2, 2], &|c, _, _| c == 0, &|_, j| j, &|_, _| {});
         });
         assert!(never.is_err());
         // a task that panics ends the call by its panic, with no thread left waiting for it
@@ -237,7 +264,7 @@ mod tests {
             .unwrap();
         let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             pool.install(|| {
-                in_chains(&[5, 5], &pipeline_rules, &|_, j| j, &|c, j| {
+                in_chains(true, &[5, 5], &pipeline_rules, &|_, j| j, &|c, j| {
                     assert!(!(c == 0 && j == 2), "a failing task");
                 })
             })
